@@ -1,0 +1,12 @@
+//! One module per subcommand; each has an `Args` struct (clap) and a `run` function.
+
+pub mod batch;
+pub mod bench;
+pub mod daemon;
+pub mod feed;
+pub mod monitor;
+pub mod plan;
+pub mod run;
+pub mod sim;
+pub mod snapshot;
+pub mod track;

@@ -1,0 +1,71 @@
+//! `handeye`: the command-line front end. Each subcommand lives in `src/cli/<name>.rs`.
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+/// Robot grasping guided by uncalibrated stereo vision.
+///
+/// Frames, robot state and commands move over iceoryx2 shared memory (see wire/README.md), so
+/// the simulator and real cameras are interchangeable. Start with `make demo`, or:
+///
+///   handeye feed --mono --dir ../shared/data/visp-cube --loop &
+///   handeye monitor --count 200
+#[derive(Parser)]
+#[command(name = "handeye", version, about, long_about, propagate_version = true)]
+struct Cli {
+    /// Log level filter (error, warn, info, debug, trace, or a tracing filter directive).
+    #[arg(long, global = true, env = "HANDEYE_LOG", default_value = "warn")]
+    log: String,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Publish stereo frames from image files on `handeye/stereo`.
+    Feed(cli::feed::FeedArgs),
+    /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency.
+    Monitor(cli::monitor::MonitorArgs),
+    /// Track one polygon through an image sequence with the affine contour tracker.
+    Track(cli::track::TrackArgs),
+    /// Run the simulator: physics, stereo rendering, robot controller, over shared memory.
+    Sim(cli::sim::SimArgs),
+    /// Render a scenario's stereo pair to PNGs with ground truth for testing.
+    Snapshot(cli::snapshot::SnapshotArgs),
+    /// Run the hard-loop daemon against whatever publishes on the services.
+    Daemon(cli::daemon::DaemonArgs),
+    /// Run one closed-loop grasp scenario: simulator and daemon as two processes.
+    Run(cli::run::RunArgs),
+    /// Find planar facets (and grasp sites) in one stereo pair.
+    Plan(cli::plan::PlanArgs),
+    /// Run many closed-loop scenarios and report the success rate.
+    Batch(cli::batch::BatchArgs),
+    /// Measure handeye's parts: transport, tracker, render, planner, loop.
+    Bench(cli::bench::BenchArgs),
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    init_logging(&cli.log);
+    match cli.command {
+        Command::Feed(args) => cli::feed::run(args),
+        Command::Monitor(args) => cli::monitor::run(args),
+        Command::Track(args) => cli::track::run(args),
+        Command::Sim(args) => cli::sim::run(args),
+        Command::Snapshot(args) => cli::snapshot::run(args),
+        Command::Daemon(args) => cli::daemon::run(args),
+        Command::Run(args) => cli::run::run(args),
+        Command::Plan(args) => cli::plan::run(args),
+        Command::Batch(args) => cli::batch::run(args),
+        Command::Bench(args) => cli::bench::run(args),
+    }
+}
+
+fn init_logging(filter: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_new(filter)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+}

@@ -1,0 +1,5 @@
+//! handeye's vision algorithms. Pure: no I/O, no threads, no clocks (time comes in as
+//! arguments), so every algorithm can be tested on synthetic images with exact ground truth.
+
+pub mod affine;
+pub mod image;
