@@ -1,1 +1,10 @@
-//! placeholder
+//! handeye's simulator: a rapier3d work cell (table, polyhedral blocks, a 5-DOF arm with a
+//! parallel-jaw gripper), the arm's own controller, and a headless wgpu renderer of a verged
+//! stereo pair. See `sim/README.md` for the robot frame and the scenario format.
+
+pub mod arm;
+pub mod geometry;
+pub mod kinematics;
+pub mod rng;
+pub mod scenario;
+pub mod world;
