@@ -7,11 +7,14 @@
 //! conventions. Palm frame: x along the tool axis (from the roll flange towards the finger
 //! tips), y the finger closing axis, z the normal of the tracked plate.
 //!
-//! What made grasping work (CRATE_NOTES §3.5): multibody self-contacts off, force-based
-//! finger motors with ~0.1 kg fingers squeezing at 20 N, the palm kept above the grasp, and
-//! interpolated targets. The arm links have gravity scale 0: the controller is modelled with
-//! ideal gravity compensation, as industrial controllers have; payloads still load the arm
-//! and the controller's integral term removes the sag they cause.
+//! What made grasping work (CRATE_NOTES §3.5 plus what this arm needed, each observed):
+//! multibody self-contacts off; force-based, stiff arm motors (acceleration-based ones left
+//! the light wrist soft enough to twist under a grasp); force-based finger motors on ~0.1 kg
+//! fingers squeezing at 5 N, closed gently by the controller; contacts 4x stiffer than
+//! rapier's default; blocks that never sleep; the palm kept above the grasp height.
+//! The arm links have gravity scale 0: the controller is modelled with ideal gravity
+//! compensation, as industrial controllers have; payloads still load the arm and the
+//! controller's integral term removes the sag they cause.
 
 use glam::{DMat3, DQuat, DVec3, Quat, Vec3};
 use rapier3d::prelude::*;
@@ -37,13 +40,18 @@ pub const FINGER_WIDTH_M: f64 = 0.020;
 /// Half width of the palm across the fingers and half its thickness, metres.
 pub const PALM_HALF_WIDTH_M: f64 = 0.056;
 pub const PALM_HALF_THICKNESS_M: f64 = 0.02;
-/// Finger squeeze force when closed, newtons.
-pub const GRIP_FORCE_N: f64 = 20.0;
+/// Finger squeeze force when closed, newtons. With friction ~1 it holds ~10 N, ten times the
+/// heaviest block; squeezing harder (15-20 N) made rapier's contact solver push light blocks
+/// out of the jaws in a third of the trials, 3-7 N held in all of them.
+pub const GRIP_FORCE_N: f64 = 5.0;
 /// Finger motor target when closing: past the centre line, so the motor always squeezes.
 pub const FINGER_CLOSE_TARGET_M: f64 = -0.010;
 
-const ARM_STIFFNESS: f32 = 12_000.0;
-const ARM_DAMPING: f32 = 500.0;
+/// Arm joint motors: force-based (N·m/rad, N·m·s/rad) and stiff, like a geared servo.
+/// Acceleration-based gains scale with the link's effective inertia, which left the light
+/// wrist so soft that a grasp twisted it by 0.1 rad.
+const ARM_STIFFNESS: f32 = 20_000.0;
+const ARM_DAMPING: f32 = 400.0;
 const ARM_MAX_FORCE: f32 = 1_000.0;
 const FINGER_STIFFNESS: f32 = 2_000.0;
 const FINGER_DAMPING: f32 = 100.0;
@@ -184,6 +192,7 @@ impl Arm {
                 .local_anchor1(v3(anchor))
                 .local_anchor2(Vec3::ZERO)
                 .contacts_enabled(false)
+                .motor_model(MotorModel::ForceBased)
                 .motor_position(0.0, ARM_STIFFNESS, ARM_DAMPING)
                 .motor_max_force(ARM_MAX_FORCE)
         };

@@ -3,8 +3,18 @@
 //! stereo pair. See `sim/README.md` for the robot frame and the scenario format.
 
 pub mod arm;
+pub mod camera;
+pub mod controller;
+pub mod events;
 pub mod geometry;
+pub mod judge;
 pub mod kinematics;
 pub mod rng;
 pub mod scenario;
+pub mod scene;
+pub mod script;
+pub mod simulator;
 pub mod world;
+
+pub use scenario::{Scenario, ScenarioError};
+pub use simulator::{SimError, Simulator};

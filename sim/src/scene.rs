@@ -1,0 +1,246 @@
+//! What the cameras see: flat-shaded triangle meshes of the table, blocks, arm, gripper and
+//! occluders, each attached to a physics body (or a scripted pose), with a face id per
+//! triangle for ground truth. Built once per simulator; poses come from physics every frame.
+
+use glam::{DAffine3, DMat3, DVec3};
+
+use crate::arm::{
+    Arm, FINGER_THICKNESS_M, FINGER_WIDTH_M, PALM_HALF_THICKNESS_M, PALM_HALF_WIDTH_M,
+};
+use crate::geometry::BlockShape;
+use crate::kinematics::{FINGER_LENGTH_M, FOREARM_M, PALM_LENGTH_M, SHOULDER_HEIGHT_M, UPPER_ARM_M, WRIST_LINK_M};
+use crate::scenario::{Event, Scenario};
+use crate::world::{TABLE_THICKNESS_M, World};
+
+/// Face id of nothing in particular (table, arm links, background).
+pub const ID_NONE: u32 = 0;
+/// Face id of the gripper plate's light rectangle (the face the daemon tracks).
+pub const ID_PLATE: u32 = 0x1000;
+/// Face ids of the two fingers' camera-facing sides (+y finger, -y finger).
+pub const ID_FINGERS: [u32; 2] = [0x1001, 0x1002];
+
+/// Face id of face `face` of block `block`.
+pub fn block_face_id(block: usize, face: usize) -> u32 {
+    1 + (block as u32) * 16 + face as u32
+}
+
+/// The block and face of a face id, if it is one.
+pub fn decode_block_face(id: u32) -> Option<(usize, usize)> {
+    (id != ID_NONE && id < ID_PLATE).then(|| (((id - 1) / 16) as usize, ((id - 1) % 16) as usize))
+}
+
+/// Width of the dark border around the plate's light rectangle, metres.
+pub const PLATE_BORDER_M: f64 = 0.007;
+/// Albedos of the gripper plate: light rectangle and dark border.
+pub const PLATE_LIGHT: f32 = 0.95;
+pub const PLATE_DARK: f32 = 0.06;
+
+/// One vertex of a flat-shaded triangle, in its object's frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshVertex {
+    pub pos: [f32; 3],
+    pub normal: [f32; 3],
+    pub shade: f32,
+    pub id: u32,
+}
+
+/// Triangles (three vertices each) of one object.
+#[derive(Debug, Clone, Default)]
+pub struct Mesh {
+    pub vertices: Vec<MeshVertex>,
+}
+
+impl Mesh {
+    /// Adds a planar polygon (counter-clockwise seen from outside, convex or fanned from
+    /// corner `fan_from`).
+    pub fn polygon(&mut self, pts: &[DVec3], normal: DVec3, fan_from: usize, shade: f32, id: u32) {
+        let n = pts.len();
+        let v = |p: DVec3| MeshVertex { pos: p.as_vec3().to_array(), normal: normal.as_vec3().to_array(), shade, id };
+        for k in 1..n - 1 {
+            self.vertices.push(v(pts[fan_from % n]));
+            self.vertices.push(v(pts[(fan_from + k) % n]));
+            self.vertices.push(v(pts[(fan_from + k + 1) % n]));
+        }
+    }
+
+    /// Adds an axis-aligned box; `shades` in the order +x, -x, +y, -y, +z, -z; `skip` faces
+    /// (same order) are left out (e.g. one another mesh draws).
+    pub fn cuboid(&mut self, centre: DVec3, half: DVec3, shades: [f32; 6], skip: [bool; 6], id: u32) {
+        let shape = BlockShape::new(crate::geometry::BlockKind::Bar, half * 2.0);
+        let order = ["+x", "-x", "+y", "-y", "top", "bottom"];
+        for (k, name) in order.iter().enumerate() {
+            if skip[k] {
+                continue;
+            }
+            let Some(f) = shape.faces.iter().find(|f| f.name == *name) else { continue };
+            let pts: Vec<DVec3> = f.corners.iter().map(|&c| shape.corners[c] + centre).collect();
+            self.polygon(&pts, f.normal, 0, shades[k], id);
+        }
+    }
+}
+
+/// Where an object's pose comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum Attach {
+    Fixed(DAffine3),
+    Body(rapier3d::prelude::RigidBodyHandle),
+    /// Index into the scenario's events (an occluder).
+    Occluder(usize),
+}
+
+/// One drawable object.
+#[derive(Debug, Clone)]
+pub struct SceneObject {
+    pub mesh: Mesh,
+    pub attach: Attach,
+}
+
+/// Everything drawable in the work cell.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    pub objects: Vec<SceneObject>,
+}
+
+const ARM_SHADE: f32 = 0.38;
+const ARM_SIDE: f32 = 0.28;
+
+impl Scene {
+    /// Meshes for the scenario's table, blocks, arm and occluders.
+    pub fn build(scenario: &Scenario, world: &World) -> Self {
+        let mut objects = Vec::new();
+        let t = &scenario.table;
+        let mut table = Mesh::default();
+        let top = t.shade as f32;
+        let side = (t.shade * 0.7) as f32;
+        table.cuboid(
+            DVec3::new(t.center_m[0], t.center_m[1], -TABLE_THICKNESS_M / 2.0),
+            DVec3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, TABLE_THICKNESS_M / 2.0),
+            [side, side, side, side, top, side],
+            [false, false, false, false, false, true],
+            ID_NONE,
+        );
+        objects.push(SceneObject { mesh: table, attach: Attach::Fixed(DAffine3::IDENTITY) });
+
+        for (bi, b) in world.blocks.iter().enumerate() {
+            objects.push(SceneObject { mesh: block_mesh(&b.shape, &b.shades, bi), attach: Attach::Body(b.body) });
+        }
+        objects.extend(arm_objects(&world.arm));
+
+        for (ei, e) in scenario.events.iter().enumerate() {
+            if let Event::Occluder { size_mm, shade, .. } = e {
+                let mut m = Mesh::default();
+                let s = *shade as f32;
+                let half = DVec3::from_array(*size_mm) * 0.0005;
+                m.cuboid(DVec3::ZERO, half, [s, s * 0.8, s * 0.9, s * 0.7, s, s * 0.6], [false; 6], ID_NONE);
+                objects.push(SceneObject { mesh: m, attach: Attach::Occluder(ei) });
+            }
+        }
+        Self { objects }
+    }
+
+    /// Total vertex count (for sizing GPU buffers once).
+    pub fn vertex_count(&self) -> usize {
+        self.objects.iter().map(|o| o.mesh.vertices.len()).sum()
+    }
+}
+
+/// Mesh of block `index` with its face shades and ids.
+pub fn block_mesh(shape: &BlockShape, shades: &[f64], index: usize) -> Mesh {
+    let mut m = Mesh::default();
+    for (fi, f) in shape.faces.iter().enumerate() {
+        let pts: Vec<DVec3> = f.corners.iter().map(|&c| shape.corners[c]).collect();
+        m.polygon(&pts, f.normal, f.fan_from, shades.get(fi).copied().unwrap_or(0.6) as f32, block_face_id(index, fi));
+    }
+    m
+}
+
+fn arm_objects(arm: &Arm) -> Vec<SceneObject> {
+    let mut out = Vec::new();
+    let body = |h| Attach::Body(h);
+    let sh = |top: f32, side: f32| [side, side, side, side, top, side * 0.8];
+
+    let mut base = Mesh::default();
+    base.cuboid(DVec3::new(0.0, 0.0, 0.01), DVec3::new(0.08, 0.08, 0.01), sh(0.3, 0.25), [false; 6], ID_NONE);
+    out.push(SceneObject { mesh: base, attach: body(arm.base) });
+
+    let mut turret = Mesh::default();
+    turret.cuboid(
+        DVec3::new(0.0, 0.0, SHOULDER_HEIGHT_M / 2.0),
+        DVec3::new(0.05, 0.05, SHOULDER_HEIGHT_M / 2.0 - 0.02),
+        sh(ARM_SHADE, ARM_SIDE),
+        [false; 6],
+        ID_NONE,
+    );
+    out.push(SceneObject { mesh: turret, attach: body(arm.links[0]) });
+
+    for (link, len, half) in [(1, UPPER_ARM_M, 0.03), (2, FOREARM_M, 0.025), (3, WRIST_LINK_M, 0.025)] {
+        let mut m = Mesh::default();
+        m.cuboid(DVec3::X * (len / 2.0), DVec3::new(len / 2.0, half, half), sh(ARM_SHADE, ARM_SIDE), [false; 6], ID_NONE);
+        out.push(SceneObject { mesh: m, attach: body(arm.links[link]) });
+    }
+
+    // Palm: dark box whose +z face is the tracked plate, a light rectangle in a dark border.
+    let mut palm = Mesh::default();
+    let half = DVec3::new(PALM_LENGTH_M / 2.0, PALM_HALF_WIDTH_M, PALM_HALF_THICKNESS_M);
+    let centre = DVec3::X * (PALM_LENGTH_M / 2.0);
+    palm.cuboid(centre, half, [0.3, 0.3, 0.25, 0.25, 0.3, 0.2], [false, false, false, false, true, false], ID_NONE);
+    plate(&mut palm, centre + DVec3::Z * half.z, half.x, half.y);
+    out.push(SceneObject { mesh: palm, attach: body(arm.links[4]) });
+
+    for (i, side) in [1.0, -1.0].into_iter().enumerate() {
+        let mut m = Mesh::default();
+        let half = DVec3::new(FINGER_LENGTH_M / 2.0, FINGER_THICKNESS_M / 2.0, FINGER_WIDTH_M / 2.0);
+        let centre = DVec3::new(FINGER_LENGTH_M / 2.0, side * FINGER_THICKNESS_M / 2.0, 0.0);
+        m.cuboid(centre, half, [0.6, 0.6, 0.7, 0.7, 0.5, 0.5], [false, false, false, false, true, false], ID_NONE);
+        // The camera-facing side (+z in the palm frame) gets its own id for truth.
+        let z = centre.z + half.z;
+        let pts = [
+            DVec3::new(centre.x - half.x, centre.y - half.y, z),
+            DVec3::new(centre.x + half.x, centre.y - half.y, z),
+            DVec3::new(centre.x + half.x, centre.y + half.y, z),
+            DVec3::new(centre.x - half.x, centre.y + half.y, z),
+        ];
+        m.polygon(&pts, DVec3::Z, 0, 0.8, ID_FINGERS[i]);
+        out.push(SceneObject { mesh: m, attach: body(arm.fingers[i]) });
+    }
+    out
+}
+
+/// The tracked plate on a face at height `centre.z` (normal +z) with half extents `hx`, `hy`:
+/// four dark border strips around a light rectangle, all coplanar and non-overlapping.
+fn plate(m: &mut Mesh, centre: DVec3, hx: f64, hy: f64) {
+    let b = PLATE_BORDER_M;
+    let quad = |m: &mut Mesh, x0: f64, x1: f64, y0: f64, y1: f64, shade: f32, id: u32| {
+        let z = centre.z;
+        let pts = [
+            DVec3::new(centre.x + x0, centre.y + y0, z),
+            DVec3::new(centre.x + x1, centre.y + y0, z),
+            DVec3::new(centre.x + x1, centre.y + y1, z),
+            DVec3::new(centre.x + x0, centre.y + y1, z),
+        ];
+        m.polygon(&pts, DVec3::Z, 0, shade, id);
+    };
+    quad(m, -hx, hx, -hy, -hy + b, PLATE_DARK, ID_NONE);
+    quad(m, -hx, hx, hy - b, hy, PLATE_DARK, ID_NONE);
+    quad(m, -hx, -hx + b, -hy + b, hy - b, PLATE_DARK, ID_NONE);
+    quad(m, hx - b, hx, -hy + b, hy - b, PLATE_DARK, ID_NONE);
+    quad(m, -hx + b, hx - b, -hy + b, hy - b, PLATE_LIGHT, ID_PLATE);
+}
+
+/// The light rectangle of the plate, palm frame (corners counter-clockwise seen from the
+/// front), for ground truth.
+pub fn plate_corners_in_palm() -> [DVec3; 4] {
+    let (hx, hy, b) = (PALM_LENGTH_M / 2.0, PALM_HALF_WIDTH_M, PLATE_BORDER_M);
+    let c = DVec3::new(hx, 0.0, PALM_HALF_THICKNESS_M);
+    [
+        c + DVec3::new(-hx + b, -hy + b, 0.0),
+        c + DVec3::new(hx - b, -hy + b, 0.0),
+        c + DVec3::new(hx - b, hy - b, 0.0),
+        c + DVec3::new(-hx + b, hy - b, 0.0),
+    ]
+}
+
+/// An affine transform from a rotation and a translation.
+pub fn affine(rot: DMat3, pos: DVec3) -> DAffine3 {
+    DAffine3::from_mat3_translation(rot, pos)
+}

@@ -1,0 +1,149 @@
+//! The simulator without I/O: physics, the arm's controller, scripted events and the success
+//! judge, advanced in fixed steps of simulated time. Rendering ([`crate::render`]) and the
+//! transport loop ([`crate::run`]) sit on top.
+//!
+//! Determinism: the step is fixed, commands take effect only at step boundaries, events fire
+//! on simulated time, and nothing reads the wall clock, so the same scenario and the same
+//! commands give bit-identical results on one machine.
+
+use glam::{DAffine3, DVec3};
+use handeye_wire::{RobotCommand, RobotState};
+
+use crate::arm::ArmReading;
+use crate::controller::{Controller, ControllerConfig};
+use crate::events::EventState;
+use crate::judge::{SuccessJudge, Verdict};
+use crate::kinematics::{IkError, ToolPose};
+use crate::scenario::Scenario;
+use crate::scene::{Attach, Scene};
+use crate::world::World;
+
+/// Why a simulator could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("scenario {scenario:?}: the arm's home pose is not reachable: {source}")]
+    HomeUnreachable { scenario: String, source: IkError },
+}
+
+/// A running simulation.
+pub struct Simulator {
+    pub scenario: Scenario,
+    pub world: World,
+    pub controller: Controller,
+    pub events: EventState,
+    pub scene: Scene,
+    judge: SuccessJudge,
+    target: usize,
+    reading: ArmReading,
+    steps: u64,
+    frames: u64,
+}
+
+impl Simulator {
+    /// Builds the work cell of `scenario`, the arm at its home pose with the gripper open.
+    pub fn new(scenario: Scenario) -> Result<Self, SimError> {
+        let home = ToolPose { pos_m: DVec3::from_array(scenario.arm.home_m), yaw_rad: scenario.arm.home_yaw_deg.to_radians() };
+        let cfg = ControllerConfig { default_speed_mps: scenario.arm.default_speed_mps, ..ControllerConfig::default() };
+        let controller = Controller::new(cfg, home)
+            .map_err(|source| SimError::HomeUnreachable { scenario: scenario.name.clone(), source })?;
+        let world = World::new(&scenario, controller.joint_setpoint());
+        let target = scenario.target_index();
+        let judge = SuccessJudge::new(&scenario.success, world.blocks[target].rest_z_m);
+        let reading = world.arm.read(&world.physics);
+        let events = EventState::new(&scenario);
+        let scene = Scene::build(&scenario, &world);
+        Ok(Self { scenario, world, controller, events, scene, judge, target, reading, steps: 0, frames: 0 })
+    }
+
+    /// Simulated time now, ns (exact: steps × 10⁹ / rate).
+    pub fn now_ns(&self) -> u64 {
+        (u128::from(self.steps) * 1_000_000_000 / u128::from(self.scenario.physics.rate_hz)) as u64
+    }
+
+    /// Physics steps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Frames completed so far ([`Self::step_frame`] calls).
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Hands a command to the controller; it takes effect at the next step.
+    pub fn command(&mut self, cmd: &RobotCommand) {
+        let now = self.now_ns();
+        self.controller.command(cmd, now, &self.reading);
+    }
+
+    /// One physics step: events, controller tick, motors, physics, sensors, judge.
+    pub fn step(&mut self) {
+        let now = self.now_ns();
+        self.events.update(now, &mut self.world);
+        let dt = self.scenario.physics_dt_s();
+        let targets = self.controller.tick(now, dt, &self.reading);
+        self.world.arm.drive(&mut self.world.physics, &targets);
+        self.world.step();
+        self.steps += 1;
+        self.reading = self.world.arm.read(&self.world.physics);
+        let z = self.block_pose(self.target).1.translation.z;
+        self.judge.observe(self.now_ns(), z);
+    }
+
+    /// Advances one camera frame period (`physics.rate_hz / render.frame_rate_hz` steps).
+    pub fn step_frame(&mut self) {
+        for _ in 0..self.scenario.substeps_per_frame() {
+            self.step();
+        }
+        self.frames += 1;
+    }
+
+    /// The robot state the controller reports now.
+    pub fn robot_state(&mut self) -> RobotState {
+        let now = self.now_ns();
+        self.controller.state(now, &self.reading)
+    }
+
+    /// The latest sensor reading of the arm (physical truth).
+    pub fn arm_reading(&self) -> &ArmReading {
+        &self.reading
+    }
+
+    /// Index of the target block.
+    pub fn target_index(&self) -> usize {
+        self.target
+    }
+
+    /// Name and pose (robot frame) of block `i`.
+    pub fn block_pose(&self, i: usize) -> (&str, DAffine3) {
+        let b = &self.world.blocks[i];
+        let (pos, rot) = self.world.body_pose(b.body);
+        (&b.name, DAffine3::from_mat3_translation(rot, pos))
+    }
+
+    /// The success verdict so far.
+    pub fn verdict(&self) -> Verdict {
+        self.judge.verdict()
+    }
+
+    /// The judge (lift and hold so far).
+    pub fn judge(&self) -> &SuccessJudge {
+        &self.judge
+    }
+
+    /// Pose of every scene object now (`None`: not drawn, e.g. an occluder not crossing).
+    pub fn object_poses(&self, out: &mut Vec<Option<DAffine3>>) {
+        out.clear();
+        let now = self.now_ns();
+        for o in &self.scene.objects {
+            out.push(match o.attach {
+                Attach::Fixed(a) => Some(a),
+                Attach::Body(h) => {
+                    let (pos, rot) = self.world.body_pose(h);
+                    Some(DAffine3::from_mat3_translation(rot, pos))
+                }
+                Attach::Occluder(i) => self.events.occluder_position(i, now).map(DAffine3::from_translation),
+            });
+        }
+    }
+}
