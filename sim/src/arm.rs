@@ -52,7 +52,9 @@ pub const FINGER_CLOSE_TARGET_M: f64 = -0.010;
 /// wrist so soft that a grasp twisted it by 0.1 rad.
 const ARM_STIFFNESS: f32 = 20_000.0;
 const ARM_DAMPING: f32 = 400.0;
-const ARM_MAX_FORCE: f32 = 1_000.0;
+/// Torque limits per joint, N·m: enough to accelerate the (gravity-compensated) links
+/// briskly, small enough that a blocked arm pushes with tens of newtons, not hundreds.
+const ARM_MAX_TORQUE_NM: [f32; 5] = [40.0, 60.0, 40.0, 15.0, 5.0];
 const FINGER_STIFFNESS: f32 = 2_000.0;
 const FINGER_DAMPING: f32 = 100.0;
 const FINGER_DENSITY: f32 = 6_000.0;
@@ -187,24 +189,25 @@ impl Arm {
             fingers[i] = f;
         }
 
-        let revolute = |axis: Vec3, anchor: DVec3| {
+        let revolute = |axis: Vec3, anchor: DVec3, max_torque: f32| {
             RevoluteJointBuilder::new(axis)
                 .local_anchor1(v3(anchor))
                 .local_anchor2(Vec3::ZERO)
                 .contacts_enabled(false)
                 .motor_model(MotorModel::ForceBased)
                 .motor_position(0.0, ARM_STIFFNESS, ARM_DAMPING)
-                .motor_max_force(ARM_MAX_FORCE)
+                .motor_max_force(max_torque)
         };
         let mbj = &mut world.multibody_joints;
         let insert = |mbj: &mut MultibodyJointSet, a, b, j: RevoluteJointBuilder| {
             mbj.insert(a, b, j, true).expect("the arm is a tree: every joint inserts")
         };
-        let j0 = insert(mbj, base, turret, revolute(Vec3::Z, DVec3::ZERO));
-        let j1 = insert(mbj, turret, upper, revolute(Vec3::NEG_Y, shoulder));
-        let j2 = insert(mbj, upper, fore, revolute(Vec3::NEG_Y, DVec3::X * UPPER_ARM_M));
-        let j3 = insert(mbj, fore, wrist_body, revolute(Vec3::NEG_Y, DVec3::X * FOREARM_M));
-        let j4 = insert(mbj, wrist_body, palm, revolute(Vec3::X, DVec3::X * WRIST_LINK_M));
+        let t = ARM_MAX_TORQUE_NM;
+        let j0 = insert(mbj, base, turret, revolute(Vec3::Z, DVec3::ZERO, t[0]));
+        let j1 = insert(mbj, turret, upper, revolute(Vec3::NEG_Y, shoulder, t[1]));
+        let j2 = insert(mbj, upper, fore, revolute(Vec3::NEG_Y, DVec3::X * UPPER_ARM_M, t[2]));
+        let j3 = insert(mbj, fore, wrist_body, revolute(Vec3::NEG_Y, DVec3::X * FOREARM_M, t[3]));
+        let j4 = insert(mbj, wrist_body, palm, revolute(Vec3::X, DVec3::X * WRIST_LINK_M, t[4]));
         let mut finger_joints = [j0; 2];
         for (i, axis) in [Vec3::Y, Vec3::NEG_Y].into_iter().enumerate() {
             let joint = PrismaticJointBuilder::new(axis)

@@ -28,6 +28,9 @@ pub mod fault {
     pub const PATH: u32 = 2;
 }
 
+/// Consecutive control ticks within tolerance before `ARRIVED` is reported.
+const ARRIVE_TICKS: u32 = 4;
+
 /// Tunables of the controller.
 #[derive(Debug, Clone, Copy)]
 pub struct ControllerConfig {
@@ -67,8 +70,8 @@ impl Default for ControllerConfig {
             watchdog_ns: 200_000_000,
             arrive_tol_m: 0.0005,
             arrive_tol_rad: 0.5f64.to_radians(),
-            fault_track_err_m: 0.03,
-            fault_after_ns: 300_000_000,
+            fault_track_err_m: 0.01,
+            fault_after_ns: 200_000_000,
             finger_speed_mps: 0.05,
             integral_gain: 4.0,
             integral_limit_rad: 0.03,
@@ -108,6 +111,8 @@ pub struct Controller {
     last_command_frame_id: u64,
     state_seq: u64,
     track_err_since_ns: Option<u64>,
+    /// Consecutive ticks with the tool within tolerance of the goal.
+    ticks_in_tolerance: u32,
 }
 
 impl Controller {
@@ -138,6 +143,7 @@ impl Controller {
             last_command_frame_id: NO_FRAME,
             state_seq: 0,
             track_err_since_ns: None,
+            ticks_in_tolerance: 0,
         })
     }
 
@@ -320,7 +326,14 @@ impl Controller {
                     .clamp(-self.cfg.integral_limit_rad, self.cfg.integral_limit_rad);
             }
         }
-        if !self.arrived && !self.trajectory_running() && self.fault == 0 && self.within_tolerance(reading, self.goal) {
+        // Arrived: the set-point is at the goal and the tool has stayed within tolerance of it
+        // for a few ticks (a single tick could be a bounce).
+        if !self.trajectory_running() && self.fault == 0 && self.within_tolerance(reading, self.goal) {
+            self.ticks_in_tolerance = self.ticks_in_tolerance.saturating_add(1);
+        } else {
+            self.ticks_in_tolerance = 0;
+        }
+        if !self.arrived && !self.stopped && !self.watchdog_stop && self.ticks_in_tolerance >= ARRIVE_TICKS {
             self.arrived = true;
         }
 

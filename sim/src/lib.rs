@@ -18,3 +18,6 @@ pub mod world;
 
 pub use scenario::{Scenario, ScenarioError};
 pub use simulator::{SimError, Simulator};
+
+/// The glam (0.33, the one rapier uses) of every vector and matrix in this crate's API.
+pub use glam;
