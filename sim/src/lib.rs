@@ -9,11 +9,13 @@ pub mod events;
 pub mod geometry;
 pub mod judge;
 pub mod kinematics;
+pub mod render;
 pub mod rng;
 pub mod scenario;
 pub mod scene;
 pub mod script;
 pub mod simulator;
+pub mod truth;
 pub mod world;
 
 pub use scenario::{Scenario, ScenarioError};

@@ -14,6 +14,7 @@ use crate::controller::{Controller, ControllerConfig};
 use crate::events::EventState;
 use crate::judge::{SuccessJudge, Verdict};
 use crate::kinematics::{IkError, ToolPose};
+use crate::render::{FrameInput, Sensor};
 use crate::scenario::Scenario;
 use crate::scene::{Attach, Scene};
 use crate::world::World;
@@ -129,6 +130,29 @@ impl Simulator {
     /// The judge (lift and hold so far).
     pub fn judge(&self) -> &SuccessJudge {
         &self.judge
+    }
+
+    /// Sensor models of the two cameras.
+    pub fn sensors(&self) -> [Sensor; 2] {
+        let s = |i: usize| Sensor {
+            noise_sigma: self.scenario.cameras[i].noise_sigma,
+            blur_sigma_px: self.scenario.cameras[i].blur_sigma_px,
+        };
+        [s(0), s(1)]
+    }
+
+    /// What to render now; `poses` from [`Self::object_poses`]. The noise seed depends only
+    /// on the scenario seed and the frame count, so frames are reproducible.
+    pub fn frame_input<'a>(&'a self, poses: &'a [Option<DAffine3>]) -> FrameInput<'a> {
+        FrameInput {
+            scene: &self.scene,
+            poses,
+            cameras: &self.events.cameras,
+            lighting: &self.events.lighting,
+            background: self.scenario.render.background,
+            sensors: self.sensors(),
+            noise_seed: crate::rng::mix64(self.scenario.seed) ^ self.frames,
+        }
     }
 
     /// Pose of every scene object now (`None`: not drawn, e.g. an occluder not crossing).
