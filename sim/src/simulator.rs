@@ -91,6 +91,11 @@ impl Simulator {
         self.judge.observe(self.now_ns(), z);
     }
 
+    /// Counts a frame whose physics steps were taken one by one with [`Self::step`].
+    pub fn count_frame(&mut self) {
+        self.frames += 1;
+    }
+
     /// Advances one camera frame period (`physics.rate_hz / render.frame_rate_hz` steps).
     pub fn step_frame(&mut self) {
         for _ in 0..self.scenario.substeps_per_frame() {

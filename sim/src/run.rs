@@ -1,0 +1,250 @@
+//! Running the simulator against a transport: lockstep (publish frame N, wait for the
+//! daemon's command stamped N or a time-out, then step physics by one frame period; with no
+//! daemon attached it steps straight on) and real time (frames at the camera rate, stamped
+//! with their capture time, commands applied as they arrive).
+//!
+//! [`Runner`] is the part without I/O (simulate, render, hash); [`Transport`] is whatever
+//! carries frames, state and commands (iceoryx2 services in `handeye sim`, or nothing).
+
+use std::time::{Duration, Instant};
+
+use handeye_wire::{RobotCommand, RobotState};
+
+use crate::hash::FramesHash;
+use crate::render::{RenderError, Renderer};
+use crate::simulator::Simulator;
+
+/// Describes one published stereo frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameMeta {
+    pub frame_id: u64,
+    /// Simulated time of the frame, ns.
+    pub sim_time_ns: u64,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Why a run stopped early.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error("transport: {0}")]
+    Transport(String),
+}
+
+/// Carries frames and robot state out and commands in.
+pub trait Transport {
+    /// Publishes one frame; `fill` renders it into the payload buffer it is given
+    /// (`2 * width * height` bytes, left rows then right rows).
+    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<(), RunError>;
+    fn publish_state(&mut self, state: &RobotState) -> Result<(), RunError>;
+    /// Appends the commands that have arrived (without blocking).
+    fn receive_commands(&mut self, out: &mut Vec<RobotCommand>) -> Result<(), RunError>;
+    /// Blocks until a command may have arrived, or `timeout` passes.
+    fn wait_for_commands(&mut self, timeout: Duration) -> Result<(), RunError>;
+    /// Whether anyone publishes commands (a daemon is attached).
+    fn daemon_attached(&mut self) -> bool;
+}
+
+/// A transport that carries nothing: frames are rendered (and hashed) but go nowhere, and
+/// no commands arrive. Used by `handeye bench render` and by tests.
+pub struct NoTransport {
+    buffer: Vec<u8>,
+}
+
+impl NoTransport {
+    pub fn new() -> Self {
+        Self { buffer: Vec::new() }
+    }
+}
+
+impl Default for NoTransport {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Transport for NoTransport {
+    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<(), RunError> {
+        self.buffer.resize((meta.width * meta.height * 2) as usize, 0);
+        fill(&mut self.buffer)?;
+        Ok(())
+    }
+    fn publish_state(&mut self, _: &RobotState) -> Result<(), RunError> {
+        Ok(())
+    }
+    fn receive_commands(&mut self, _: &mut Vec<RobotCommand>) -> Result<(), RunError> {
+        Ok(())
+    }
+    fn wait_for_commands(&mut self, _: Duration) -> Result<(), RunError> {
+        Ok(())
+    }
+    fn daemon_attached(&mut self) -> bool {
+        false
+    }
+}
+
+/// Simulation + rendering + the hash over every published pixel.
+pub struct Runner {
+    pub sim: Simulator,
+    pub renderer: Renderer,
+    poses: Vec<Option<glam::DAffine3>>,
+    pub hash: FramesHash,
+    /// Hash of each published frame, in order (kept only when `keep_frame_hashes`).
+    pub frame_hashes: Vec<u64>,
+    pub keep_frame_hashes: bool,
+}
+
+impl Runner {
+    pub fn new(sim: Simulator) -> Result<Self, RenderError> {
+        let renderer = Renderer::for_scene(&sim.scene, &sim.events.cameras)?;
+        Ok(Self { sim, renderer, poses: Vec::new(), hash: FramesHash::default(), frame_hashes: Vec::new(), keep_frame_hashes: false })
+    }
+
+    /// Metadata of the frame the current state would give.
+    pub fn meta(&self) -> FrameMeta {
+        FrameMeta {
+            frame_id: self.sim.frames(),
+            sim_time_ns: self.sim.now_ns(),
+            width: self.renderer.width(),
+            height: self.renderer.height(),
+        }
+    }
+
+    /// Renders the current state into `out` and hashes it.
+    pub fn render_into(&mut self, out: &mut [u8]) -> Result<(), RenderError> {
+        self.sim.object_poses(&mut self.poses);
+        let frame = self.sim.frame_input(&self.poses);
+        self.renderer.render(&frame, out)?;
+        let h = self.hash.add(out);
+        if self.keep_frame_hashes {
+            self.frame_hashes.push(h);
+        }
+        Ok(())
+    }
+
+    /// Renders and publishes the current frame and the robot state.
+    pub fn publish(&mut self, transport: &mut dyn Transport) -> Result<FrameMeta, RunError> {
+        let meta = self.meta();
+        transport.publish_frame(&meta, &mut |buf| self.render_into(buf))?;
+        let state = self.sim.robot_state();
+        transport.publish_state(&state)?;
+        Ok(meta)
+    }
+}
+
+/// Options of a run.
+#[derive(Debug, Clone, Copy)]
+pub struct RunOptions {
+    /// Frames to publish; `None` = until the scenario's time-out or success.
+    pub frames: Option<u64>,
+    /// Lockstep: longest wait for the daemon's command for a frame.
+    pub reply_timeout: Duration,
+    /// Without `frames`: stop as soon as the success rule is met (else at the time-out).
+    pub stop_on_success: bool,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RunStats {
+    pub frames: u64,
+    pub wall_s: f64,
+    /// Frames per wall-clock second.
+    pub fps: f64,
+    pub frames_hash: u64,
+    pub commands: u64,
+    /// Lockstep frames whose reply did not come in time.
+    pub reply_timeouts: u64,
+    /// Real time: frames published later than their slot.
+    pub late_frames: u64,
+}
+
+fn done(runner: &Runner, options: &RunOptions, published: u64) -> bool {
+    use crate::judge::Verdict;
+    match (options.frames, runner.sim.verdict()) {
+        (Some(n), _) => published >= n,
+        (None, Verdict::TimedOut) => true,
+        (None, Verdict::Success { .. }) => options.stop_on_success,
+        (None, Verdict::Pending) => false,
+    }
+}
+
+/// Lockstep: publish frame N, wait for a command stamped N (or the time-out; at once if no
+/// daemon is attached), apply the commands, step one frame period. Deterministic for a seed.
+pub fn run_lockstep(runner: &mut Runner, transport: &mut dyn Transport, options: &RunOptions) -> Result<RunStats, RunError> {
+    let start = Instant::now();
+    let mut stats = RunStats::default();
+    let mut commands = Vec::new();
+    while !done(runner, options, stats.frames) {
+        let meta = runner.publish(transport)?;
+        stats.frames += 1;
+        let deadline = Instant::now() + options.reply_timeout;
+        let mut answered = !transport.daemon_attached();
+        loop {
+            commands.clear();
+            transport.receive_commands(&mut commands)?;
+            for c in &commands {
+                runner.sim.command(c);
+                stats.commands += 1;
+                answered |= c.frame_id == meta.frame_id;
+            }
+            if answered {
+                break;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                stats.reply_timeouts += 1;
+                break;
+            }
+            transport.wait_for_commands(deadline - now)?;
+        }
+        runner.sim.step_frame();
+    }
+    finish(runner, stats, start)
+}
+
+/// Real time: one frame per camera period of wall-clock time; commands are applied at the
+/// next physics step after they arrive.
+pub fn run_realtime(runner: &mut Runner, transport: &mut dyn Transport, options: &RunOptions) -> Result<RunStats, RunError> {
+    let start = Instant::now();
+    let period = Duration::from_secs_f64(1.0 / f64::from(runner.sim.scenario.render.frame_rate_hz));
+    let mut stats = RunStats::default();
+    let mut commands = Vec::new();
+    let mut next = start;
+    while !done(runner, options, stats.frames) {
+        runner.publish(transport)?;
+        stats.frames += 1;
+        next += period;
+        // Physics substeps for this period, taking commands between them as they arrive.
+        for _ in 0..runner.sim.scenario.substeps_per_frame() {
+            commands.clear();
+            transport.receive_commands(&mut commands)?;
+            for c in &commands {
+                runner.sim.command(c);
+                stats.commands += 1;
+            }
+            runner.sim.step();
+        }
+        runner.sim.count_frame();
+        let now = Instant::now();
+        if now > next {
+            stats.late_frames += 1;
+            next = now; // do not try to catch up with a burst
+        } else {
+            transport.wait_for_commands(next - now)?;
+            let rest = next.saturating_duration_since(Instant::now());
+            if !rest.is_zero() {
+                std::thread::sleep(rest);
+            }
+        }
+    }
+    finish(runner, stats, start)
+}
+
+fn finish(runner: &Runner, mut stats: RunStats, start: Instant) -> Result<RunStats, RunError> {
+    stats.wall_s = start.elapsed().as_secs_f64();
+    stats.fps = if stats.wall_s > 0.0 { stats.frames as f64 / stats.wall_s } else { 0.0 };
+    stats.frames_hash = runner.hash.value;
+    Ok(stats)
+}
