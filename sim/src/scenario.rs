@@ -727,8 +727,8 @@ mod tests {
 
     #[test]
     fn wrong_type_names_field_path_and_line() {
-        let text = PICK_CUBE.replace("focal_px = 1350.0\nresolution = [640, 480]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]",
-            "focal_px = 1350.0\nresolution = [640, \"480\"]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]");
+        let text = PICK_CUBE.replace("focal_px = 1800.0\nresolution = [640, 480]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]",
+            "focal_px = 1800.0\nresolution = [640, \"480\"]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]");
         assert_ne!(text, PICK_CUBE);
         let e = parse(&text).unwrap_err();
         assert_eq!(e.line, line_of(&text, "\"480\""), "{e}");
@@ -779,7 +779,7 @@ mod tests {
             + &PICK_CUBE[PICK_CUBE.find("[[blocks]]").unwrap()..];
         let e = parse(&one_cam).unwrap_err();
         assert_eq!(e.field, "cameras");
-        let both = PICK_CUBE.replacen("focal_px = 1350.0", "focal_px = 1350.0\nvfov_deg = 20.0", 1);
+        let both = PICK_CUBE.replacen("focal_px = 1800.0", "focal_px = 1800.0\nvfov_deg = 20.0", 1);
         let e = parse(&both).unwrap_err();
         assert_eq!(e.field, "cameras[0]", "{e}");
     }

@@ -1,9 +1,128 @@
-use anyhow::{bail, Result};
+//! `handeye sim`: run the simulator.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
 use clap::Args;
+use handeye_sim::judge::Verdict;
+use handeye_sim::run::{NoTransport, RunOptions, Runner, run_lockstep, run_realtime};
+use handeye_sim::{Scenario, Simulator};
 
+/// Run the simulator: physics, the robot's controller and stereo rendering.
+///
+/// Publishes one GRAY8 stereo sample per frame and the robot state, and takes robot
+/// commands, like a real camera pair and robot would (see wire/README.md). Ground truth stays
+/// inside; the success verdict is printed at the end.
+///
+/// Modes:
+///   --lockstep   publish frame N, wait for the daemon's command stamped N (or
+///                --reply-timeout-ms), then step physics one frame period; with no daemon
+///                attached it steps straight on. Bit-identical frames for a seed.
+///   (default)    real time: frames at the scenario's camera rate, stamped with their
+///                capture time; commands act at the next physics step.
+///
+/// Examples:
+///   handeye sim scenarios/pick_cube.toml --lockstep --frames 100 --json
+///   handeye sim scenarios/pick_cube_bump.toml
 #[derive(Args)]
-pub struct SimArgs {}
+pub struct SimArgs {
+    /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
+    scenario: PathBuf,
+    /// Lockstep with the daemon instead of real time.
+    #[arg(long)]
+    lockstep: bool,
+    /// Stop after this many frames (default: run until success, or the scenario's time-out).
+    #[arg(long)]
+    frames: Option<u64>,
+    /// Without --frames, keep running after success until the scenario's time-out.
+    #[arg(long)]
+    no_stop_on_success: bool,
+    /// Lockstep: longest wait for the daemon's command for a frame, milliseconds.
+    #[arg(long, default_value_t = 1000)]
+    reply_timeout_ms: u64,
+    /// Print one JSON object at the end: frames, fps, frames_hash (a hash over every
+    /// published pixel), verdict, and more.
+    #[arg(long)]
+    json: bool,
+}
 
-pub fn run(_args: SimArgs) -> Result<()> {
-    bail!("'handeye sim' is not built yet (issue #3)")
+/// Mesa's Vulkan driver complains on stderr when XDG_RUNTIME_DIR is unset (it probes for a
+/// Wayland display); give it a private directory so headless runs stay quiet.
+pub fn quiet_mesa() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("handeye-xdg-{}", std::process::id()));
+    if std::fs::create_dir_all(&dir).is_ok() {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+        }
+        // SAFETY: called at the start of a subcommand, before any thread is spawned (no
+        // renderer, transport or worker exists yet), so nothing reads the environment
+        // concurrently.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+    }
+}
+
+pub fn run(args: SimArgs) -> Result<()> {
+    quiet_mesa();
+    let scenario = Scenario::load(&args.scenario)?;
+    let name = scenario.name.clone();
+    let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
+    let adapter = runner.renderer.adapter();
+    if !args.json {
+        eprintln!("renderer: {adapter}");
+    }
+    let options = RunOptions {
+        frames: args.frames,
+        reply_timeout: Duration::from_millis(args.reply_timeout_ms),
+        stop_on_success: !args.no_stop_on_success,
+    };
+    // The iceoryx2 transport (handeye-wire) is wired in once it lands; until then frames are
+    // rendered and hashed but not sent, and no commands arrive.
+    let mut transport = NoTransport::new();
+    let transport_name = "none (wire transport not merged yet)";
+    let stats = if args.lockstep {
+        run_lockstep(&mut runner, &mut transport, &options)?
+    } else {
+        run_realtime(&mut runner, &mut transport, &options)?
+    };
+    let verdict = runner.sim.verdict();
+    let verdict_text = match verdict {
+        Verdict::Pending => "pending".to_string(),
+        Verdict::Success { at_ns } => format!("success at {:.2} s", at_ns as f64 * 1e-9),
+        Verdict::TimedOut => "timed out".to_string(),
+    };
+    if args.json {
+        let out = serde_json::json!({
+            "scenario": name,
+            "mode": if args.lockstep { "lockstep" } else { "realtime" },
+            "frames": stats.frames,
+            "fps": stats.fps,
+            "wall_s": stats.wall_s,
+            "sim_time_s": runner.sim.now_ns() as f64 * 1e-9,
+            "frames_hash": format!("{:016x}", stats.frames_hash),
+            "commands": stats.commands,
+            "reply_timeouts": stats.reply_timeouts,
+            "late_frames": stats.late_frames,
+            "verdict": verdict,
+            "max_lift_mm": runner.sim.judge().max_lift_m * 1e3,
+            "adapter": adapter,
+            "transport": transport_name,
+        });
+        println!("{out}");
+    } else {
+        println!(
+            "{name}: {} frames in {:.2} s ({:.1} fps), {:.2} s simulated; verdict: {verdict_text}; frames hash {:016x}",
+            stats.frames,
+            stats.wall_s,
+            stats.fps,
+            runner.sim.now_ns() as f64 * 1e-9,
+            stats.frames_hash
+        );
+    }
+    Ok(())
 }

@@ -35,6 +35,7 @@ pub struct SnapshotArgs {
 }
 
 pub fn run(args: SnapshotArgs) -> Result<()> {
+    crate::cli::sim::quiet_mesa();
     let scenario = Scenario::load(&args.scenario)?;
     let mut sim = Simulator::new(scenario)?;
     for _ in 0..args.frames {

@@ -28,12 +28,12 @@ pub struct ViewUniform {
     pub params: [f32; 4],
 }
 
-/// Per-view post-processing uniform (matches `Post` in shaders/post.wgsl).
+/// Per-view blur uniform (matches `Post` in shaders/post.wgsl).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PostUniform {
     pub params: [f32; 4],
-    pub seed: [u32; 4],
+    pub layer: [u32; 4],
 }
 
 /// Reinterprets plain `#[repr(C)]` data of `f32`/`u32` fields as bytes.
@@ -406,7 +406,7 @@ impl Gpu {
     }
 
     /// Renders both views as GRAY8 into `out` (left rows, then right rows, `width` bytes a
-    /// row). `post` runs the blur/noise pass; without it the shaded scene is copied as is.
+    /// row). `post` runs the blur pass; without it the shaded scene is copied as is.
     pub fn render_gray(&self, vertex_count: u32, background: f64, post: bool, out: &mut [u8]) -> Result<(), RenderError> {
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         let clear = wgpu::Color { r: background, g: 0.0, b: 0.0, a: 1.0 };

@@ -10,6 +10,7 @@
 //! `pixel_from_robot` projection that ground truth uses.
 
 mod gpu;
+pub mod noise;
 
 use glam::DAffine3;
 
@@ -62,6 +63,8 @@ pub struct Renderer {
     width: u32,
     height: u32,
     staging: Vec<GpuVertex>,
+    /// Sensor-noise tables per view (built on first use for that view's sigma).
+    noise: [Option<noise::NoiseTable>; 2],
 }
 
 impl Renderer {
@@ -70,7 +73,7 @@ impl Renderer {
     pub fn new(width: u32, height: u32, max_vertices: usize) -> Result<Self, RenderError> {
         let gpu = Gpu::new(width, height, max_vertices)?;
         tracing::info!(adapter = %describe(&gpu.adapter), "renderer ready");
-        Ok(Self { gpu, width, height, staging: Vec::with_capacity(max_vertices) })
+        Ok(Self { gpu, width, height, staging: Vec::with_capacity(max_vertices), noise: [None, None] })
     }
 
     /// A renderer sized for `scene` seen by `cameras`.
@@ -121,24 +124,38 @@ impl Renderer {
             light: [l.direction.x as f32, l.direction.y as f32, l.direction.z as f32, l.intensity as f32],
             params: [l.ambient as f32, 0.0, 0.0, 0.0],
         };
-        let seed = mix64(frame.noise_seed) as u32;
         let post = |i: usize| {
             let s = frame.sensors[i];
             let radius = (2.0 * s.blur_sigma_px).ceil().min(4.0) as f32;
-            PostUniform {
-                params: [s.blur_sigma_px as f32, (s.noise_sigma / 255.0) as f32, radius, 0.0],
-                seed: [seed, i as u32, 0, 0],
-            }
+            PostUniform { params: [s.blur_sigma_px as f32, radius, 0.0, 0.0], layer: [i as u32, 0, 0, 0] }
         };
         self.gpu.upload(&self.staging, &[view(&frame.cameras[0]), view(&frame.cameras[1])], &[post(0), post(1)])?;
         Ok(self.staging.len() as u32)
     }
 
-    /// Renders the stereo pair into `out` (GRAY8, left then right, `width` bytes a row).
+    /// Renders the stereo pair into `out` (GRAY8, left then right, `width` bytes a row):
+    /// scene, optional blur (GPU), then sensor noise (CPU, see [`noise`]).
     pub fn render(&mut self, frame: &FrameInput<'_>, out: &mut [u8]) -> Result<(), RenderError> {
         let n = self.prepare(frame)?;
-        let post = frame.sensors.iter().any(|s| s.noise_sigma > 0.0 || s.blur_sigma_px > 0.0);
-        self.gpu.render_gray(n, frame.background, post, out)
+        let blur = frame.sensors.iter().any(|s| s.blur_sigma_px > 0.0);
+        self.gpu.render_gray(n, frame.background, blur, out)?;
+        let view = (self.width * self.height) as usize;
+        for (i, pixels) in out.chunks_exact_mut(view).enumerate().take(2) {
+            let sigma = frame.sensors[i].noise_sigma;
+            if sigma > 0.0 {
+                let table = match &self.noise[i] {
+                    Some(t) if t.sigma() == sigma => &self.noise[i],
+                    _ => {
+                        self.noise[i] = Some(noise::NoiseTable::new(sigma));
+                        &self.noise[i]
+                    }
+                };
+                if let Some(t) = table {
+                    t.apply(pixels, self.width as usize, mix64(frame.noise_seed ^ ((i as u64 + 1) << 56)));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Renders which face covers each pixel (see [`crate::scene`] for the ids; 0 = none) in
