@@ -2,5 +2,6 @@
 //! arguments), so every algorithm can be tested on synthetic images with exact ground truth.
 
 pub mod affine;
+pub mod grasp;
 pub mod image;
 pub mod servo;
