@@ -4,4 +4,5 @@
 pub mod affine;
 pub mod grasp;
 pub mod image;
+pub mod pointing;
 pub mod servo;
