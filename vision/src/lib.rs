@@ -4,5 +4,6 @@
 pub mod affine;
 pub mod grasp;
 pub mod image;
+pub mod locate;
 pub mod pointing;
 pub mod servo;
