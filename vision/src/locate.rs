@@ -246,7 +246,7 @@ pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &Loca
     if blobs.is_empty() {
         return Err(LocateError::NoMotion { threshold });
     }
-    blobs.sort_by(|a, b| b.area_px.cmp(&a.area_px));
+    blobs.sort_by_key(|b| std::cmp::Reverse(b.area_px));
     let (centre_px, axis_rad, length_px, width_px) = all.shape();
     Ok(Motion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
 }

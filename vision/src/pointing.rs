@@ -86,7 +86,7 @@ fn normaliser(points: &[[f64; 2]]) -> Result<Matrix3<f64>, PointingError> {
     let n = points.len() as f64;
     let (cx, cy) = points.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0] / n, y + p[1] / n));
     let mean = points.iter().map(|p| ((p[0] - cx).powi(2) + (p[1] - cy).powi(2)).sqrt()).sum::<f64>() / n;
-    if !(mean > 0.0) {
+    if mean.is_nan() || mean <= 0.0 {
         return Err(PointingError::DegeneratePoints);
     }
     let s = std::f64::consts::SQRT_2 / mean;
@@ -126,7 +126,7 @@ impl PlaneHomography {
         order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
         // A second (near-)zero eigenvalue: more than one map fits, the points are degenerate.
         let (l2, lmax) = (eig.eigenvalues[order[1]], eig.eigenvalues[order[8]]);
-        if !(l2 > 1e-9 * lmax) {
+        if l2.is_nan() || l2 <= 1e-9 * lmax {
             return Err(PointingError::DegeneratePoints);
         }
         let h_vec = eig.eigenvectors.column(order[0]);
@@ -188,7 +188,7 @@ impl Pointing {
         let (na, nb) = (a.xy(), b.xy());
         let sin = (na[0] * nb[1] - na[1] * nb[0]).abs() / (na.norm() * nb.norm());
         let crossing_rad = sin.min(1.0).asin();
-        if !(crossing_rad >= self.min_crossing_rad) {
+        if crossing_rad.is_nan() || crossing_rad < self.min_crossing_rad {
             return Err(PointingError::NearlyParallel { angle_rad: if crossing_rad.is_finite() { crossing_rad } else { 0.0 } });
         }
         let x = a.cross(&b);

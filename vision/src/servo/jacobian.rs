@@ -38,7 +38,7 @@ impl ServoModel {
         }
         let mtm = model.m.transpose() * model.m;
         let eig = mtm.symmetric_eigenvalues();
-        if !(eig.min() > 1e-12 * eig.max()) {
+        if eig.min().is_nan() || eig.min() <= 1e-12 * eig.max() {
             return Err(ModelError::RankDeficient);
         }
         let pinv = mtm.try_inverse().ok_or(ModelError::RankDeficient)? * model.m.transpose();

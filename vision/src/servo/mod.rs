@@ -474,7 +474,7 @@ impl CoplanarityServo {
         let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
         let condition = smin / smax;
         out.condition = condition;
-        if !(condition >= self.config.min_condition) {
+        if condition.is_nan() || condition < self.config.min_condition {
             let f = if condition.is_finite() || smax == 0.0 { ServoFailure::SingularJacobian { condition: if smax == 0.0 { 0.0 } else { condition } } } else { ServoFailure::NotFinite };
             return self.outcome(fail(out, f));
         }

@@ -230,11 +230,11 @@ pub(super) fn run(sc: &Scenario) -> Outcome {
     let mut servo = CoplanarityServo::new(servo_model, sc.config).unwrap();
     let mut history = Vec::new();
     let outcome = loop {
-        if let Some((at, cam, axis, deg)) = sc.knock {
-            if servo.steps() == at {
-                let c = if cam == 0 { &mut rig.left } else { &mut rig.right };
-                *c = c.knocked(axis, deg.to_radians());
-            }
+        if let Some((at, cam, axis, deg)) = sc.knock
+            && servo.steps() == at
+        {
+            let c = if cam == 0 { &mut rig.left } else { &mut rig.right };
+            *c = c.knocked(axis, deg.to_radians());
         }
         let target = observe_target(&rig, &sc.facet, &mut rng, sc.noise_px);
         let gripper = observe_gripper(&rig, &pose, &mut rng, sc.noise_px);
