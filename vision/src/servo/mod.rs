@@ -21,19 +21,40 @@
 //!   [`ServoModel::epipolar_right`]); the reference point's affine coordinates in the target
 //!   frame, mean of both views; `ρ` the angle of the gripper axis in the target's `(s, t)`
 //!   coordinates minus the goal angle (radians, wrapped to `(−π, π]`).
-//! - **Goal** [`ServoGoal`]: `(s*, t*)`, the goal angle, and goal parallaxes (0 = coplanar;
-//!   [`ServoModel::parallax_for_offset`] turns a metric stand-off into pixels).
+//! - **Goal** [`ServoGoal`]: `(s*, t*)`, the goal angle, and goal parallaxes (0 = coplanar).
+//!   [`ServoGoal::offset_by`] shifts a goal by a metric offset (a stand-off out of the plane,
+//!   or "30 mm above the grasp site"); [`ServoGoal::teach`] takes the current view as goal.
 //!
 //! # Control
 //! `Δq = −g Ĵ⁺ e` with `Ĵ` the Jacobian from the affine model ([`ServoModel::jacobian`]),
 //! optionally refined by Broyden rank-1 updates. Rows are weighted to comparable pixel sizes
-//! and yaw is scaled to a distance before the pseudo-inverse, so the solution and the
-//! conditioning test do not depend on units. With a 4-DOF arm the six errors need not all reach zero (a facet
-//! tilted from vertical cannot be matched by yaw alone): the loop converges to the
-//! least-squares pose, and convergence is judged on `Ĵ⁺ e`, the estimated remaining pose
-//! offset, in metres and radians.
+//! and yaw is scaled to a distance (`yaw_lever_m`) before the pseudo-inverse, so neither the
+//! solution nor the conditioning test depends on units. With a 4-DOF arm the six errors need
+//! not all reach zero (a facet tilted from vertical cannot be matched by yaw alone): the loop
+//! converges to the least-squares pose, so convergence is judged on `Ĵ⁺ e`, the estimated
+//! pose offset, in metres and radians, averaged over the last few steps; the step that
+//! reports convergence carries one last move that removes that averaged offset.
 //!
-//! No heap allocation per step: everything is fixed-size.
+//! Because every quantity is measured on gripper and target *together* in the same images, a
+//! stale model (a camera knocked mid-servo) only makes `Ĵ` less accurate; the loop still
+//! converges. The closed-loop tests (`servo/tests.rs`, perspective cameras 2 m away, 20°
+//! apart, model from an 8-point cage) converge in ~12 steps to ~0.3 mm off the plane, and to
+//! < 1 mm and < 1° with ±0.3 px contour noise, after 3-5° camera knocks, and with a stand-off.
+//!
+//! No heap allocation per step: everything is fixed-size (`vision/tests/servo_no_alloc.rs`).
+//!
+//! # Use (the daemon's servo phase)
+//! ```text
+//! let model = ServoModel::new(&affine_stereo)?;              // after the cage calibration
+//! let mut servo = CoplanarityServo::new(model, ServoConfig::default())?;
+//! let goal = ServoGoal { st: site_st, angle_rad: 0.0, parallax_px: [0.0; 3] }
+//!     .offset_by(&model, &target, &standoff_m)?;
+//! each look, once the previous move is done (look-and-move):
+//!     let s = servo.step(&target_frames, &gripper_view, &goal);
+//!     Move      => send MoveBy(s.motion)
+//!     Converged => send MoveBy(s.motion), then the open-loop grasp
+//!     Failed(f) => send Stop, report f
+//! ```
 
 mod jacobian;
 mod measure;
