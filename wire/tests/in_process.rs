@@ -326,3 +326,27 @@ fn robot_state_history_reaches_a_late_subscriber_and_telemetry_flows() {
     };
     assert_eq!((got.frame_id, got.reason_text()), (12, "servoing".to_owned()));
 }
+
+#[test]
+fn flush_waits_until_the_subscriber_has_taken_every_frame() {
+    // iceoryx2 discards frames still queued when their publisher goes away, so a finite feed
+    // must flush before it exits.
+    let d = TestDomain::new("flush");
+    let pub_node = WireNode::create(&d.0, "pub").unwrap();
+    let sub_node = WireNode::create(&d.0, "sub").unwrap();
+    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
+    let options = StereoPublisherOptions {
+        delivery: Delivery::Lossless { in_flight: 2, timeout: Duration::from_millis(50) },
+        ..Default::default()
+    };
+    let mut p = StereoPublisher::create(&pub_node, geometry, options).unwrap();
+    p.publish(0, fill_pattern(0, &geometry)).unwrap();
+    p.publish(0, fill_pattern(1, &geometry)).unwrap();
+    assert!(!p.flush(Duration::from_millis(30)).unwrap(), "nothing was taken yet");
+    assert_eq!(drain(&mut sub), vec![0, 1]);
+    assert!(p.flush(Duration::from_millis(500)).unwrap());
+    // Flushing gives the slots back: publishing goes on.
+    p.publish(0, fill_pattern(2, &geometry)).unwrap();
+    assert_eq!(drain(&mut sub), vec![2]);
+}

@@ -149,8 +149,8 @@ impl StereoPublisher {
                 .max_loaned_samples(STEREO_SIZING.publisher_max_loaned_samples);
             if let Delivery::Lossless { in_flight, .. } = options.delivery {
                 // The credit pool: only `in_flight` slots exist, and a slot comes back only when
-                // every subscriber has released the frame in it.
-                builder = builder.override_sample_preallocation(move |_| in_flight);
+                // every subscriber has released the frame in it. `flush` loans them all at once.
+                builder = builder.max_loaned_samples(in_flight).override_sample_preallocation(move |_| in_flight);
             }
             match builder.create() {
                 Ok(p) => break p,
@@ -250,7 +250,11 @@ impl StereoPublisher {
         if payload_len > self.max_payload {
             return Err(PublishError::PayloadTooLarge { len: payload_len, max: self.max_payload });
         }
-        let mut sample = self.loan(payload_len)?;
+        let timeout = match self.delivery {
+            Delivery::Latest => Duration::ZERO,
+            Delivery::Lossless { timeout, .. } => timeout,
+        };
+        let mut sample = self.loan(payload_len, timeout)?;
         {
             let payload: &mut [MaybeUninit<u8>] = sample.payload_mut();
             // SAFETY: the slot lives in a shared-memory mapping, which the kernel zero-fills
@@ -269,14 +273,30 @@ impl StereoPublisher {
         Ok(())
     }
 
+    /// With lossless delivery, waits until every frame sent so far has been released by every
+    /// subscriber, so that dropping the publisher now loses nothing (iceoryx2 discards frames
+    /// still queued when their publisher goes away). Returns `Ok(false)` on time-out. With
+    /// latest delivery there is nothing to wait for and it returns `Ok(true)` at once.
+    pub fn flush(&mut self, timeout: Duration) -> Result<bool, PublishError> {
+        let Delivery::Lossless { in_flight, .. } = self.delivery else { return Ok(true) };
+        let deadline = Instant::now() + timeout;
+        let mut held = Vec::with_capacity(in_flight);
+        for _ in 0..in_flight {
+            match self.loan(self.layout.payload_len, deadline.saturating_duration_since(Instant::now())) {
+                Ok(s) => held.push(s),
+                Err(PublishError::NoCapacity { .. }) => return Ok(false),
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(true) // dropping `held` returns the slots unsent
+    }
+
     fn loan(
         &mut self,
         payload_len: usize,
+        timeout: Duration,
     ) -> Result<iceoryx2::sample_mut_uninit::SampleMutUninit<ipc::Service, [MaybeUninit<u8>], StereoHeader>, PublishError> {
-        let (in_lossless, timeout) = match self.delivery {
-            Delivery::Latest => (false, Duration::ZERO),
-            Delivery::Lossless { timeout, .. } => (true, timeout),
-        };
+        let in_lossless = matches!(self.delivery, Delivery::Lossless { .. });
         let start = Instant::now();
         let mut next_cleanup = start + Duration::from_millis(100);
         loop {
