@@ -20,7 +20,7 @@ Examples:
 JSON keys: frames, rejected (total), rejected_by_reason {version, pixel_format, zero_size,
 too_large, stride, payload_length, frame_id}, missed, fps, latency_ns_p50, latency_ns_p99,
 latency_ns_max (null without frames), receive_errors, publisher_up, publisher_gone, events
-[{event, time_ns, last_frame_id}], completed (--count reached), duration_s, and with
+[{event, time_ns, last_frame_id, frames}], completed (--count reached), duration_s, and with
 --checksum: checksum (16 hex digits, FNV-1a 64 over every frame's pixels in order, rows
 without stride padding, left then right; see handeye_wire::checksum).";
 
@@ -68,6 +68,8 @@ struct Event {
     name: &'static str,
     time_ns: u64,
     last_frame_id: Option<u64>,
+    /// Valid frames received before the event.
+    frames: u64,
 }
 
 /// Nearest-rank percentile of sorted values.
@@ -129,7 +131,12 @@ pub fn run(args: MonitorArgs) -> Result<()> {
                 let t = monotonic_ns();
                 last_activity = Instant::now();
                 eprintln!("monitor: publisher up at {t} ns");
-                events.push(Event { name: "publisher_up", time_ns: t, last_frame_id: last_frame.map(|f| f.0) });
+                events.push(Event {
+                    name: "publisher_up",
+                    time_ns: t,
+                    last_frame_id: last_frame.map(|f| f.0),
+                    frames: sub.stats().received,
+                });
             }
             StereoEvent::PublisherGone => {
                 let t = monotonic_ns();
@@ -139,7 +146,7 @@ pub fn run(args: MonitorArgs) -> Result<()> {
                     "monitor: publisher gone at {t} ns (last frame id {})",
                     last_id.map_or("-".to_owned(), |i| i.to_string())
                 );
-                events.push(Event { name: "publisher_gone", time_ns: t, last_frame_id: last_id });
+                events.push(Event { name: "publisher_gone", time_ns: t, last_frame_id: last_id, frames: sub.stats().received });
             }
             StereoEvent::Timeout => {}
             StereoEvent::Interrupted => break,
@@ -171,7 +178,7 @@ pub fn run(args: MonitorArgs) -> Result<()> {
             "receive_errors": stats.receive_errors,
             "publisher_up": stats.publisher_up,
             "publisher_gone": stats.publisher_gone,
-            "events": events.iter().map(|e| json!({"event": e.name, "time_ns": e.time_ns, "last_frame_id": e.last_frame_id})).collect::<Vec<_>>(),
+            "events": events.iter().map(|e| json!({"event": e.name, "time_ns": e.time_ns, "last_frame_id": e.last_frame_id, "frames": e.frames})).collect::<Vec<_>>(),
             "completed": completed,
             "duration_s": start.elapsed().as_secs_f64(),
             "domain": domain.name(),
