@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use handeye_wire::checksum::PixelChecksum;
 use handeye_wire::stereo::{StereoEvent, StereoStats, StereoSubscriber};
@@ -54,6 +54,10 @@ pub struct MonitorArgs {
     /// monitor skips frames, counted as missed); 2 absorbs short stalls.
     #[arg(long, default_value_t = 2, value_name = "FRAMES")]
     pub queue: usize,
+
+    /// Also write the JSON object to FILE (whatever the output format).
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<std::path::PathBuf>,
 
     /// Seconds between progress lines on stderr (0 = none).
     #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
@@ -163,30 +167,33 @@ pub fn run(args: MonitorArgs) -> Result<()> {
     latencies.sort_unstable();
     let fps = fps(first_frame_ns, last_frame, stats.received);
     let completed = args.count > 0 && stats.received >= args.count;
+    let by_reason: serde_json::Map<String, serde_json::Value> =
+        stats.rejected_by_reason().map(|(k, v)| (k.to_owned(), json!(v))).collect();
+    let mut report = json!({
+        "frames": stats.received,
+        "rejected": stats.rejected_total(),
+        "rejected_by_reason": by_reason,
+        "missed": stats.missed,
+        "fps": fps,
+        "latency_ns_p50": percentile(&latencies, 50.0),
+        "latency_ns_p99": percentile(&latencies, 99.0),
+        "latency_ns_max": latencies.last(),
+        "receive_errors": stats.receive_errors,
+        "publisher_up": stats.publisher_up,
+        "publisher_gone": stats.publisher_gone,
+        "events": events.iter().map(|e| json!({"event": e.name, "time_ns": e.time_ns, "last_frame_id": e.last_frame_id, "frames": e.frames})).collect::<Vec<_>>(),
+        "completed": completed,
+        "duration_s": start.elapsed().as_secs_f64(),
+        "domain": domain.name(),
+    });
+    if args.checksum {
+        report["checksum"] = json!(format!("{:016x}", checksum.value()));
+    }
+    if let Some(path) = &args.report {
+        std::fs::write(path, format!("{report:#}\n")).with_context(|| format!("cannot write the report {}", path.display()))?;
+    }
     if args.json {
-        let by_reason: serde_json::Map<String, serde_json::Value> =
-            stats.rejected_by_reason().map(|(k, v)| (k.to_owned(), json!(v))).collect();
-        let mut out = json!({
-            "frames": stats.received,
-            "rejected": stats.rejected_total(),
-            "rejected_by_reason": by_reason,
-            "missed": stats.missed,
-            "fps": fps,
-            "latency_ns_p50": percentile(&latencies, 50.0),
-            "latency_ns_p99": percentile(&latencies, 99.0),
-            "latency_ns_max": latencies.last(),
-            "receive_errors": stats.receive_errors,
-            "publisher_up": stats.publisher_up,
-            "publisher_gone": stats.publisher_gone,
-            "events": events.iter().map(|e| json!({"event": e.name, "time_ns": e.time_ns, "last_frame_id": e.last_frame_id, "frames": e.frames})).collect::<Vec<_>>(),
-            "completed": completed,
-            "duration_s": start.elapsed().as_secs_f64(),
-            "domain": domain.name(),
-        });
-        if args.checksum {
-            out["checksum"] = json!(format!("{:016x}", checksum.value()));
-        }
-        println!("{out}");
+        println!("{report}");
     } else {
         println!("frames:    {}", stats.received);
         println!("rejected:  {}{}", stats.rejected_total(), reasons_text(&stats));
