@@ -11,6 +11,13 @@ use handeye_wire::{monotonic_ns, WireNode};
 use super::domain::DomainArgs;
 
 const EXAMPLES: &str = "\
+Images are read in file-name order and sent as 8-bit gray (GRAY8): gray PNGs unchanged, colour
+PNGs converted with the image crate's to_luma8 (Y = 0.2126 R + 0.7152 G + 0.0722 B on the stored
+sRGB values, alpha dropped, 16-bit scaled to 8-bit). All images must have one size. Frame ids
+count up from 0; capture and publish times are CLOCK_MONOTONIC ns at sending. The feed waits for
+a subscriber before it starts, prints progress to stderr, lets the subscriber take the last
+frame before it exits, and ends cleanly on Ctrl-C.
+
 Examples:
   # the cube sequence as both views, 30 frames/s, forever (stop with Ctrl-C)
   handeye feed --mono --dir ../shared/data/visp-cube --loop

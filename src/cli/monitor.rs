@@ -12,6 +12,11 @@ use serde_json::json;
 use super::domain::DomainArgs;
 
 const EXAMPLES: &str = "\
+Progress lines and publisher events (\"publisher up at <ns> ns\", \"publisher gone at <ns> ns\")
+go to stderr as they happen; the summary goes to stdout at the end: after --count frames, after
+--timeout without frames, or on Ctrl-C. Latency is the publisher's publish stamp to the moment
+this process holds the validated frame (CLOCK_MONOTONIC, same host).
+
 Examples:
   handeye monitor                                 # report once a second until Ctrl-C
   handeye monitor --count 200 --json --checksum   # 200 frames, then one JSON object

@@ -5,7 +5,6 @@
 //! segment in `/dev/shm` and every management file under `/tmp/iceoryx2/` of that domain
 //! starts with it. Two processes talk only if they use the same domain.
 
-use std::cell::Cell;
 use std::rc::Rc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Once;
@@ -146,7 +145,6 @@ pub fn init_iceoryx2_logging() {
 pub(crate) struct NodeInner {
     pub(crate) node: Node<ipc::Service>,
     pub(crate) domain: Domain,
-    interrupted: Cell<bool>,
 }
 
 /// The iceoryx2 node of one process in one domain. Cheap to clone (shared); not `Send`, like
@@ -176,7 +174,7 @@ impl WireNode {
         if node.wait(Duration::ZERO).is_err() {
             TERMINATION.store(true, Ordering::Relaxed);
         }
-        Ok(Self { inner: Rc::new(NodeInner { node, domain: domain.clone(), interrupted: Cell::new(false) }) })
+        Ok(Self { inner: Rc::new(NodeInner { node, domain: domain.clone() }) })
     }
 
     pub fn domain(&self) -> &Domain {
@@ -190,7 +188,7 @@ impl WireNode {
 
     /// True once SIGINT or SIGTERM has been received by this process (sticky).
     pub fn termination_requested(&self) -> bool {
-        if TERMINATION.load(Ordering::Relaxed) || self.inner.interrupted.get() {
+        if TERMINATION.load(Ordering::Relaxed) {
             return true;
         }
         if self.inner.node.wait(Duration::ZERO).is_err() {

@@ -187,6 +187,13 @@ mod tests {
     }
 
     #[test]
+    fn message_services_reserve_the_slots_the_readme_lists() {
+        assert_eq!(ROBOT_STATE_SIZING.slots_per_publisher(), 22);
+        assert_eq!(ROBOT_COMMAND_SIZING.slots_per_publisher(), 52);
+        assert_eq!(TELEMETRY_SIZING.slots_per_publisher(), 38);
+    }
+
+    #[test]
     fn history_fits_in_every_subscriber_queue() {
         // iceoryx2 refuses to create a service whose history exceeds the subscriber buffer.
         for s in [STEREO_SIZING, ROBOT_STATE_SIZING, ROBOT_COMMAND_SIZING, TELEMETRY_SIZING] {
