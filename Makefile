@@ -20,7 +20,7 @@ test: setup
 
 # Installs, builds, runs the headline job and says where its output is.
 demo: build
-	bash scripts/demo.sh
+	DATA=$(DATA) BIN=target/release/handeye bash scripts/demo.sh
 
 clean:
 	$(CARGO) clean

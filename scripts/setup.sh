@@ -4,8 +4,11 @@
 #
 #   mesa-vulkan-drivers + libvulkan1  software Vulkan (lavapipe) for the simulator's renderer
 #                                     on machines without a GPU; skipped when a Vulkan ICD exists.
+#   gcc + libc6-dev                   the C linker Rust links with; only if `cc` is missing
+#                                     (a bare rustup install does not bring one).
 #
-# iceoryx2 needs nothing but a writable /dev/shm; rapier, nalgebra and glam need nothing.
+# iceoryx2 needs nothing but a writable /dev/shm (and /tmp); rapier, nalgebra and glam need
+# nothing.
 set -euo pipefail
 
 need=()
@@ -17,9 +20,14 @@ loader=false
 if ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; then loader=true; fi
 $loader || need+=(libvulkan1)
 $have_icd || need+=(mesa-vulkan-drivers)
+command -v cc >/dev/null 2>&1 || need+=(gcc libc6-dev)
+
+if [ ! -w /dev/shm ]; then
+    echo "setup: warning: /dev/shm is missing or not writable; handeye's shared memory needs it" >&2
+fi
 
 if [ ${#need[@]} -eq 0 ]; then
-    echo "setup: system packages present (Vulkan loader and ICD found)"
+    echo "setup: system packages present (Vulkan loader and ICD, C linker)"
     exit 0
 fi
 

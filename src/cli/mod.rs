@@ -3,6 +3,7 @@
 pub mod batch;
 pub mod bench;
 pub mod daemon;
+pub mod domain;
 pub mod feed;
 pub mod monitor;
 pub mod plan;

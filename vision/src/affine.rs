@@ -205,6 +205,17 @@ impl AffineStereo {
         self.pseudo_inverse() * Vector4::new(e_left[0], e_left[1], e_right[0], e_right[1])
     }
 
+    /// Unit direction from the workspace towards the cameras (the mean of both cameras'),
+    /// robot frame. Each affine camera looks along `r_u × r_v` (its two rows), for images with
+    /// `u` right and `v` down; the grasp planner uses this to tell a facet's front from its back.
+    pub fn toward_cameras(&self) -> Vector3<f64> {
+        let look = |r: usize| {
+            let (ru, rv) = (self.m.row(r).transpose(), self.m.row(r + 1).transpose());
+            ru.cross(&rv).normalize()
+        };
+        -(look(0) + look(2)).normalize()
+    }
+
     /// The epipolar constraint implied by the model: `n` is the left null vector of `M`.
     pub fn epipolar(&self) -> EpipolarConstraint {
         let full = Matrix4::from_columns(&[
@@ -291,6 +302,25 @@ mod tests {
         nan[0].x = f64::NAN;
         assert!(matches!(AffineStereo::fit(&nan, &vec![[0.0; 4]; 8]), Err(FitError::NotFinite)));
         assert!(matches!(EpipolarConstraint::fit(&[[1.0; 4]; 5]), Err(FitError::Degenerate(_))));
+    }
+
+    #[test]
+    fn toward_cameras_points_at_the_cameras() {
+        // These cameras look along +y (u grows with x, v with −z), so the cameras are at −y.
+        let (m, c) = cameras();
+        let model = AffineStereo { m, c, residual_rms_px: 0.0, disparity_range_px: [0.0; 2] };
+        let t = model.toward_cameras();
+        assert!(t[1] < -0.95 && (t.norm() - 1.0).abs() < 1e-12, "{t:?}");
+        // A model fitted to perspective cameras 2 m away, up 25°, in front along +x.
+        let rig = crate::servo::testcam::Rig::standard(1500.0);
+        let seen: Vec<[f64; 4]> = cage().iter().map(|x| {
+            let p = rig.project(x);
+            [p.left[0], p.left[1], p.right[0], p.right[1]]
+        }).collect();
+        let t = AffineStereo::fit(&cage(), &seen).unwrap().toward_cameras();
+        let mid = 0.5 * (rig.left.centre_m + rig.right.centre_m) - Vector3::new(0.5, 0.0, 0.1);
+        let angle = t.dot(&mid.normalize()).acos().to_degrees();
+        assert!(angle < 3.0, "{angle}° from the true direction: {t:?}");
     }
 
     #[test]

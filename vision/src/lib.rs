@@ -2,4 +2,8 @@
 //! arguments), so every algorithm can be tested on synthetic images with exact ground truth.
 
 pub mod affine;
+pub mod grasp;
 pub mod image;
+pub mod locate;
+pub mod pointing;
+pub mod servo;

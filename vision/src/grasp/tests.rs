@@ -1,0 +1,266 @@
+//! Grasp-planner tests on hand-built scenes, one per rule of chapter 6.
+
+use nalgebra::Vector3;
+
+use super::*;
+
+fn p(x: f64, y: f64, z: f64) -> Vector3<f64> {
+    Vector3::new(x, y, z)
+}
+
+/// A facet whose edges are its polygon's sides.
+fn facet(polygon_m: Vec<Vector3<f64>>, component: usize) -> SceneFacet {
+    let n = polygon_m.len();
+    let edges = (0..n).map(|i| Segment3::new(polygon_m[i], polygon_m[(i + 1) % n])).collect();
+    SceneFacet { polygon_m, edges, component }
+}
+
+/// The front (x = x1, facing the cameras) and top faces of the box [x0, x1] x [y0, y1] x [0, h].
+/// Front polygon order: bottom-left, bottom-right, top-right, top-left (seen from +x: y grows
+/// to the left... the order only fixes the facet frame: o = bottom at y0, e1 along +y, e2 up).
+fn block(x: [f64; 2], y: [f64; 2], h: f64, component: usize) -> Vec<SceneFacet> {
+    vec![
+        facet(vec![p(x[1], y[0], 0.0), p(x[1], y[1], 0.0), p(x[1], y[1], h), p(x[1], y[0], h)], component),
+        facet(vec![p(x[0], y[0], h), p(x[1], y[0], h), p(x[1], y[1], h), p(x[0], y[1], h)], component),
+    ]
+}
+
+/// The cameras are in front (+x), a little to the side and above.
+fn scene(facets: Vec<SceneFacet>, edges: Vec<SceneEdge>) -> GraspScene {
+    GraspScene { facets, edges, toward_viewer: p(1.0, 0.2, 0.7) }
+}
+
+fn plan(s: &GraspScene) -> GraspPlan {
+    plan_grasps(s, None, &GraspConfig::default()).unwrap()
+}
+
+fn reasons_for(plan: &GraspPlan, facet: usize) -> Vec<RejectReason> {
+    plan.rejected.iter().filter(|r| r.facet == facet).map(|r| r.reason).collect()
+}
+
+#[test]
+fn a_cube_is_grasped_across_its_top() {
+    let s = scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![]);
+    let plan = plan(&s);
+    let g = plan.chosen.expect("a grasp");
+    // Front top edge against the top face's back edge: 40 mm across, centred.
+    assert_eq!(g.site.facet, 0);
+    assert_eq!(g.site.rear_edge, EdgeRef::Facet { facet: 1, edge: 3 });
+    assert!((g.site.width_m - 0.04).abs() < 1e-12);
+    assert!((g.site.front_m - p(0.04, 0.02, 0.04)).norm() < 1e-12);
+    assert!((g.site.centre_m - p(0.02, 0.02, 0.04)).norm() < 1e-12);
+    assert!((g.tool_m - p(0.02, 0.02, 0.015)).norm() < 1e-12, "finger tips at the low-water mark");
+    assert!((g.site.jaw_axis - p(-1.0, 0.0, 0.0)).norm() < 1e-12, "jaws close from the front face inwards");
+    assert!(g.yaw_rad.abs() < 1e-12);
+    assert!((g.opening_m - 0.06).abs() < 1e-12);
+    assert_eq!(g.approach, p(0.0, 0.0, -1.0));
+    // Facet frame: o = (0.04, 0, 0), e1 = +y 40 mm, e2 = up 40 mm; the site is mid-top.
+    assert!((g.site.facet_st[0] - 0.5).abs() < 1e-12 && (g.site.facet_st[1] - 1.0).abs() < 1e-12, "{:?}", g.site.facet_st);
+    // The zero-width grasp on the front edge alone would put the rear finger on the top face.
+    let r = reasons_for(&plan, 0);
+    assert!(r.contains(&RejectReason::FingerCollision { feature: FeatureRef::Facet(1) }), "{r:?}");
+    // The bottom edge is parallel but 40 mm down: out of the fingers' reach.
+    assert!(r.iter().any(|x| matches!(x, RejectReason::RearOutOfReach { drop_m } if (drop_m - 0.04).abs() < 1e-12)), "{r:?}");
+    // The top face is horizontal: not a graspable facet.
+    assert!(matches!(reasons_for(&plan, 1)[..], [RejectReason::FacetNotVertical { tilt_rad }] if (tilt_rad.to_degrees() - 90.0).abs() < 1e-9));
+    assert_eq!(plan.candidates.len(), 1);
+}
+
+/// A block whose front face leans back by `tilt_deg` (its top edge stays horizontal).
+fn leaning_block(tilt_deg: f64) -> GraspScene {
+    let h = 0.04;
+    let top_x = 0.04 - h * tilt_deg.to_radians().tan();
+    let front = facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.04, 0.0), p(top_x, 0.04, h), p(top_x, 0.0, h)], 0);
+    let top = facet(vec![p(0.0, 0.0, h), p(top_x, 0.0, h), p(top_x, 0.04, h), p(0.0, 0.04, h)], 0);
+    scene(vec![front, top], vec![])
+}
+
+#[test]
+fn facets_within_20_degrees_of_vertical_only() {
+    let ok = plan(&leaning_block(19.0));
+    let g = ok.chosen.expect("19° is graspable");
+    assert!((g.site.width_m - (0.04 - 0.04 * 19f64.to_radians().tan())).abs() < 1e-12);
+    let no = plan(&leaning_block(21.0));
+    assert!(no.chosen.is_none());
+    assert!(matches!(reasons_for(&no, 0)[..], [RejectReason::FacetNotVertical { tilt_rad }] if (tilt_rad.to_degrees() - 21.0).abs() < 1e-9), "{:?}", no.rejected);
+}
+
+/// A vertical front face whose top edge rises by `slope_deg` along +y, and a loose rear edge
+/// parallel to it 30 mm behind.
+fn sloped_top(slope_deg: f64) -> GraspScene {
+    let rise = 0.04 * slope_deg.to_radians().tan();
+    let front = facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.04, 0.0), p(0.04, 0.04, 0.04 + rise), p(0.04, 0.0, 0.04)], 0);
+    let rear = SceneEdge { segment: Segment3::new(p(0.01, 0.0, 0.04), p(0.01, 0.04, 0.04 + rise)), component: 0 };
+    scene(vec![front], vec![rear])
+}
+
+#[test]
+fn top_edges_within_30_degrees_of_horizontal_only() {
+    let ok = plan(&sloped_top(29.0));
+    let g = ok.chosen.expect("a 29° top edge is usable");
+    // Equally high, the 30 mm pairing beats the top edge's zero-width pairing with itself.
+    assert_eq!(g.site.rear_edge, EdgeRef::Loose(0));
+    assert!(ok.rejected.iter().any(|r| r.reason == RejectReason::NotHighest && r.rear_edge == Some(EdgeRef::Facet { facet: 0, edge: 2 })));
+    assert!((g.site.width_m - 0.03).abs() < 1e-12);
+    let no = plan(&sloped_top(31.0));
+    assert!(no.chosen.is_none());
+    let r = reasons_for(&no, 0);
+    assert!(matches!(r[..], [RejectReason::TopEdgeTooSteep { slope_rad }] if (slope_rad.to_degrees() - 31.0).abs() < 1e-9), "{r:?}");
+    // Side and bottom edges are not top edges: a spire (sides 80° from horizontal, the facet
+    // beside them rather than below) has none, and says so.
+    let spire = scene(vec![facet(vec![p(0.0, 0.0, 0.0), p(0.0, 0.02, 0.0), p(0.0, 0.01, 0.06)], 0)], vec![]);
+    assert_eq!(reasons_for(&plan(&spire), 0), vec![RejectReason::NoTopEdge]);
+}
+
+#[test]
+fn width_at_most_50_mm() {
+    let ok = plan(&scene(block([0.0, 0.049], [0.0, 0.04], 0.04, 0), vec![]));
+    assert!((ok.chosen.expect("49 mm fits").site.width_m - 0.049).abs() < 1e-12);
+    let no = plan(&scene(block([0.0, 0.051], [0.0, 0.04], 0.04, 0), vec![]));
+    assert!(no.chosen.is_none(), "{:?}", no.chosen);
+    assert!(reasons_for(&no, 0).iter().any(|r| matches!(r, RejectReason::TooWide { width_m } if (width_m - 0.051).abs() < 1e-12)));
+}
+
+#[test]
+fn zero_width_grasps_of_thin_walls_are_allowed() {
+    // A wall seen face-on, no top face reconstructed: the top edge is its own rear edge.
+    let wall = facet(vec![p(0.0, 0.0, 0.0), p(0.0, 0.06, 0.0), p(0.0, 0.06, 0.04), p(0.0, 0.0, 0.04)], 0);
+    let g = plan(&scene(vec![wall], vec![])).chosen.expect("a grasp on the wall");
+    assert_eq!(g.site.rear_edge, EdgeRef::Facet { facet: 0, edge: 2 });
+    assert_eq!(g.site.front_edge, 2);
+    assert!(g.site.width_m.abs() < 1e-12);
+    assert!((g.site.front_m - p(0.0, 0.03, 0.04)).norm() < 1e-12, "the most central site");
+    assert!((g.opening_m - 0.02).abs() < 1e-12);
+}
+
+#[test]
+fn rear_edges_must_be_behind_the_facet() {
+    // A parallel edge of the same object 20 mm in front of the face (towards the cameras).
+    let front_edge = SceneEdge { segment: Segment3::new(p(0.06, 0.0, 0.04), p(0.06, 0.04, 0.04)), component: 0 };
+    let plan = plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![front_edge]));
+    let r = reasons_for(&plan, 0);
+    assert!(r.iter().any(|x| matches!(x, RejectReason::RearInFront { width_m } if (width_m + 0.02).abs() < 1e-12)), "{r:?}");
+    // Edges of another object never pair with this one.
+    let other = SceneEdge { segment: Segment3::new(p(0.02, 0.0, 0.04), p(0.02, 0.04, 0.04)), component: 7 };
+    let plan2 = plan_grasps(&scene(vec![facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.04, 0.0), p(0.04, 0.04, 0.04), p(0.04, 0.0, 0.04)], 0)], vec![other]), None, &GraspConfig::default()).unwrap();
+    assert!(plan2.rejected.iter().all(|r| r.rear_edge != Some(EdgeRef::Loose(0))));
+    assert!(plan2.candidates.iter().all(|g| g.site.rear_edge != EdgeRef::Loose(0)));
+}
+
+#[test]
+fn fingers_collide_with_features_above_the_low_water_mark_only() {
+    // Cube A, and a block B 10 mm behind it: the rear finger sweeps 3..20 mm behind A's back
+    // face. B 30 mm tall reaches above the low-water mark (40 − 25 = 15 mm): collision.
+    let tall_scene = a_and_b(0.03);
+    let tall = plan(&tall_scene);
+    let r = reasons_for(&tall, 0);
+    assert!(r.iter().any(|x| matches!(x, RejectReason::FingerCollision { feature } if feature_component(&tall_scene, *feature) == 1)), "{r:?}");
+    assert!(tall.candidates.iter().all(|g| g.site.facet != 0), "A must not be grasped");
+    // B 10 mm tall stays below the low-water mark: no collision, A is grasped.
+    let low = plan(&a_and_b(0.01));
+    assert!(low.candidates.iter().any(|g| g.site.facet == 0 && (g.site.width_m - 0.04).abs() < 1e-12), "{:?}", low.rejected);
+    // The front finger too: a low wall 8 mm in front of A, 20 mm tall.
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.push(facet(vec![p(0.048, -0.02, 0.0), p(0.048, 0.06, 0.0), p(0.048, 0.06, 0.02), p(0.048, -0.02, 0.02)], 2));
+    let front = plan(&scene(f, vec![]));
+    assert!(reasons_for(&front, 0).iter().any(|x| matches!(x, RejectReason::FingerCollision { feature: FeatureRef::Facet(2) } | RejectReason::FingerCollision { feature: FeatureRef::Edge(EdgeRef::Facet { facet: 2, .. }) })), "{:?}", front.rejected);
+}
+
+/// Cube A (component 0) and block B (component 1) 10 mm behind it, `b_height` tall.
+fn a_and_b(b_height: f64) -> GraspScene {
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.extend(block([-0.05, -0.01], [-0.01, 0.05], b_height, 1));
+    scene(f, vec![])
+}
+
+fn feature_component(s: &GraspScene, f: FeatureRef) -> usize {
+    match f {
+        FeatureRef::Facet(i) | FeatureRef::Edge(EdgeRef::Facet { facet: i, .. }) => s.facets[i].component,
+        FeatureRef::Edge(EdgeRef::Loose(i)) => s.edges[i].component,
+    }
+}
+
+#[test]
+fn the_body_collides_with_features_above_the_high_water_mark() {
+    // A thin post C 25 mm behind cube A: beyond the fingers (they reach 40 mm from the grasp
+    // centre), inside the 100 mm body (50 mm). A post taller than the high-water mark
+    // (40 + 25 = 65 mm) hits the body; a shorter one does not.
+    let post = |h: f64| SceneEdge { segment: Segment3::new(p(-0.025, 0.02, 0.0), p(-0.025, 0.02, h)), component: 3 };
+    let hit = plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![post(0.08)]));
+    assert!(reasons_for(&hit, 0).contains(&RejectReason::BodyCollision { feature: FeatureRef::Edge(EdgeRef::Loose(0)) }), "{:?}", hit.rejected);
+    assert!(hit.chosen.is_none());
+    let clear = plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![post(0.06)]));
+    assert!(clear.chosen.is_some_and(|g| g.site.facet == 0), "{:?}", clear.rejected);
+    // Across the jaw axis the body is only 40 mm thick: the tall post 25 mm to the side of
+    // the grasp centre misses it.
+    let beside = SceneEdge { segment: Segment3::new(p(0.02, 0.045, 0.0), p(0.02, 0.045, 0.08)), component: 3 };
+    assert!(plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![beside])).chosen.is_some());
+}
+
+#[test]
+fn the_highest_collision_free_site_of_a_facet_is_kept() {
+    // A stepped front face: top edges at 40 mm (y 0..30 mm) and 60 mm (y 30..60 mm), with
+    // the top faces of both steps.
+    let front = facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.06, 0.0), p(0.04, 0.06, 0.06), p(0.04, 0.03, 0.06), p(0.04, 0.03, 0.04), p(0.04, 0.0, 0.04)], 0);
+    let low_top = facet(vec![p(0.0, 0.0, 0.04), p(0.04, 0.0, 0.04), p(0.04, 0.03, 0.04), p(0.0, 0.03, 0.04)], 0);
+    let high_top = facet(vec![p(0.0, 0.03, 0.06), p(0.04, 0.03, 0.06), p(0.04, 0.06, 0.06), p(0.0, 0.06, 0.06)], 0);
+    let plan = plan(&scene(vec![front, low_top, high_top], vec![]));
+    let g = plan.chosen.expect("a grasp");
+    assert!((g.site.front_m - p(0.04, 0.045, 0.06)).norm() < 1e-12, "{:?}", g.site);
+    let lower: Vec<_> = plan.rejected.iter().filter(|r| r.reason == RejectReason::NotHighest).collect();
+    assert_eq!(lower.len(), 1, "{:?}", plan.rejected);
+    let site = lower[0].site.unwrap();
+    assert!((site.front_m - p(0.04, 0.015, 0.04)).norm() < 1e-12 && (site.width_m - 0.04).abs() < 1e-12, "{site:?}");
+}
+
+#[test]
+fn the_site_nearest_the_indicated_point_is_chosen() {
+    // Two cubes 200 mm apart; the right one 5 mm taller.
+    let mut f = block([0.0, 0.04], [-0.12, -0.08], 0.04, 0);
+    f.extend(block([0.0, 0.04], [0.08, 0.12], 0.045, 1));
+    let s = scene(f, vec![]);
+    let cfg = GraspConfig::default();
+    let near_left = plan_grasps(&s, Some(&p(0.1, -0.13, 0.05)), &cfg).unwrap();
+    assert_eq!(near_left.candidates.len(), 2);
+    assert_eq!(near_left.chosen.unwrap().site.facet, 0);
+    let near_right = plan_grasps(&s, Some(&p(0.0, 0.05, 0.05)), &cfg).unwrap();
+    assert_eq!(near_right.chosen.unwrap().site.facet, 2);
+    assert_eq!(near_right.candidates[1].site.facet, 0);
+    // Nothing indicated: the highest.
+    assert_eq!(plan_grasps(&s, None, &cfg).unwrap().chosen.unwrap().site.facet, 2);
+}
+
+#[test]
+fn yaw_follows_the_jaw_axis_modulo_half_a_turn() {
+    // A cube turned 30° about z, its front face towards the cameras.
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let r = |x: f64, y: f64, z: f64| p(c * x - s * y, s * x + c * y, z);
+    let front = facet(vec![r(0.02, -0.02, 0.0), r(0.02, 0.02, 0.0), r(0.02, 0.02, 0.04), r(0.02, -0.02, 0.04)], 0);
+    let top = facet(vec![r(-0.02, -0.02, 0.04), r(0.02, -0.02, 0.04), r(0.02, 0.02, 0.04), r(-0.02, 0.02, 0.04)], 0);
+    let g = plan(&scene(vec![front, top], vec![])).chosen.unwrap();
+    // The jaw axis points from the front face inwards, at 210°; the symmetric yaw is 30°.
+    assert!((g.site.jaw_axis - r(-1.0, 0.0, 0.0)).norm() < 1e-12);
+    assert!((g.yaw_rad.to_degrees() - 30.0).abs() < 1e-9, "{}", g.yaw_rad.to_degrees());
+    assert!((g.tool_m - p(0.0, 0.0, 0.015)).norm() < 1e-12);
+    assert!(symmetric_yaw(std::f64::consts::FRAC_PI_2) == std::f64::consts::FRAC_PI_2);
+    assert!((symmetric_yaw(-std::f64::consts::FRAC_PI_2) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+}
+
+#[test]
+fn bad_input_is_a_named_error() {
+    let cfg = GraspConfig::default();
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f[1].polygon_m[2].z = f64::NAN;
+    assert_eq!(plan_grasps(&scene(f, vec![]), None, &cfg), Err(GraspError::InvalidFacet { index: 1, problem: "polygon_m has a coordinate that is not finite" }));
+    let line = facet(vec![p(0.0, 0.0, 0.0), p(0.0, 0.01, 0.0), p(0.0, 0.02, 0.0)], 0);
+    assert!(matches!(plan_grasps(&scene(vec![line], vec![]), None, &cfg), Err(GraspError::InvalidFacet { index: 0, .. })));
+    let dot = SceneEdge { segment: Segment3::new(p(0.0, 0.0, 0.0), p(0.0, 0.0, 0.0)), component: 0 };
+    assert!(matches!(plan_grasps(&scene(vec![], vec![dot]), None, &cfg), Err(GraspError::InvalidEdge { index: 0, .. })));
+    let s = scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![]);
+    assert_eq!(plan_grasps(&s, Some(&p(f64::NAN, 0.0, 0.0)), &cfg), Err(GraspError::InvalidIndicatedPoint));
+    assert_eq!(plan_grasps(&GraspScene { toward_viewer: Vector3::zeros(), ..s.clone() }, None, &cfg), Err(GraspError::InvalidViewDirection));
+    let bad = GraspConfig { gripper: GripperModel { max_width_m: -1.0, ..Default::default() }, ..cfg };
+    assert!(matches!(plan_grasps(&s, None, &bad), Err(GraspError::Config { field: "gripper.max_width_m", .. })));
+    // An empty scene is no error, just no grasp.
+    assert!(plan_grasps(&scene(vec![], vec![]), None, &cfg).unwrap().chosen.is_none());
+}

@@ -1,0 +1,120 @@
+//! Publisher liveness as seen by a subscriber, and rate-limited logging of rejections.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::PortFactory;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+
+use crate::services::{event_id, LIVENESS_PERIOD};
+
+/// A change in whether any publisher is connected to a service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LivenessChange {
+    /// A publisher appeared (the first one, or one after all had gone).
+    Up,
+    /// The last publisher went away: a clean exit, or a dead process whose node was cleaned up.
+    Gone,
+}
+
+/// Tracks whether a service has a live publisher. Checked on the publisher's created, dropped
+/// and dead events and every [`LIVENESS_PERIOD`] while waiting, so a SIGKILLed publisher (which
+/// sends nothing) is still noticed: the check removes dead nodes, which emits the dead event and
+/// drops the publisher count.
+#[derive(Debug)]
+pub(crate) struct Liveness {
+    alive: Option<bool>,
+    next_check: Instant,
+}
+
+impl Liveness {
+    pub(crate) fn new() -> Self {
+        Self { alive: None, next_check: Instant::now() }
+    }
+
+    /// Whether a publisher was present at the last check (`None` before the first check).
+    pub(crate) fn alive(&self) -> Option<bool> {
+        self.alive
+    }
+
+    /// Makes the next [`Liveness::check_if_due`] run now (after a lifecycle event).
+    pub(crate) fn force(&mut self) {
+        self.next_check = Instant::now();
+    }
+
+    /// Time until the next periodic check.
+    pub(crate) fn until_due(&self) -> Duration {
+        self.next_check.saturating_duration_since(Instant::now())
+    }
+
+    pub(crate) fn check_if_due<P, H>(&mut self, service: &PubSubFactory<ipc::Service, P, H>) -> Option<LivenessChange>
+    where
+        P: std::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized + 'static,
+        H: std::fmt::Debug + ZeroCopySend + 'static,
+    {
+        let now = Instant::now();
+        if now < self.next_check {
+            return None;
+        }
+        self.next_check = now + LIVENESS_PERIOD;
+        // Removing dead nodes is what turns a SIGKILLed publisher into a dropped publisher
+        // count (and a dead event for every listener of the service).
+        service.try_cleanup_dead_nodes();
+        let alive = service.dynamic_config().number_of_publishers() > 0;
+        let change = match (self.alive, alive) {
+            (Some(true), false) => Some(LivenessChange::Gone),
+            (Some(false) | None, true) => Some(LivenessChange::Up),
+            _ => None,
+        };
+        self.alive = Some(alive);
+        change
+    }
+}
+
+/// True for the event ids that announce a publisher's arrival or departure.
+pub(crate) fn is_lifecycle_event(id: usize) -> bool {
+    matches!(id, event_id::PUBLISHER_CREATED | event_id::PUBLISHER_DROPPED | event_id::PUBLISHER_DEAD)
+}
+
+/// Logs at most one line per reason per second, and says how many were suppressed.
+#[derive(Debug)]
+pub(crate) struct RateLimitedLog {
+    last: Vec<Option<Instant>>,
+    suppressed: Vec<u64>,
+}
+
+impl RateLimitedLog {
+    pub(crate) fn new(reasons: usize) -> Self {
+        Self { last: vec![None; reasons], suppressed: vec![0; reasons] }
+    }
+
+    /// Calls `log(suppressed_since_last)` if reason `index` was not logged in the last second.
+    pub(crate) fn log(&mut self, index: usize, log: impl FnOnce(u64)) {
+        let now = Instant::now();
+        let due = self.last[index].is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1));
+        if due {
+            log(self.suppressed[index]);
+            self.suppressed[index] = 0;
+            self.last[index] = Some(now);
+        } else {
+            self.suppressed[index] += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rate_limited_log_keeps_quiet_within_a_second_per_reason() {
+        let mut l = RateLimitedLog::new(2);
+        let mut lines = Vec::new();
+        for _ in 0..5 {
+            l.log(0, |s| lines.push((0, s)));
+        }
+        l.log(1, |s| lines.push((1, s)));
+        assert_eq!(lines, vec![(0, 0), (1, 0)]);
+        assert_eq!(l.suppressed[0], 4);
+    }
+}
