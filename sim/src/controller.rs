@@ -26,6 +26,8 @@ pub mod fault {
     /// The set-point left the reachable workspace mid-motion (should not happen: paths are
     /// checked when accepted).
     pub const PATH: u32 = 2;
+    /// The physics reported a non-finite pose (it blew up); the reported numbers are zeroed.
+    pub const PHYSICS: u32 = 3;
 }
 
 /// Consecutive control ticks within tolerance before `ARRIVED` is reported.
@@ -419,9 +421,19 @@ impl Controller {
         }
     }
 
-    /// The state to publish now.
+    /// The state to publish now. Always a valid wire message: the finger width is clamped at
+    /// 0 (a closed jaw reads a hair below its limit) and a non-finite reading faults the
+    /// controller rather than going out.
     pub fn state(&mut self, now_ns: u64, reading: &ArmReading) -> RobotState {
         self.state_seq += 1;
+        let finite = reading.tool_m.is_finite()
+            && reading.q_rad.iter().all(|q| q.is_finite())
+            && reading.finger_m.iter().all(|f| f.is_finite())
+            && reading.yaw_rad().is_finite();
+        if !finite && self.fault == 0 {
+            self.fault = fault::PHYSICS;
+            self.freeze();
+        }
         let mut flags = 0;
         if self.trajectory_running() || (!self.arrived && !self.stopped && !self.watchdog_stop && self.fault == 0) {
             flags |= robot_flags::MOVING;
@@ -454,10 +466,10 @@ impl Controller {
             time_ns: now_ns,
             last_command_seq: self.last_command_seq,
             last_command_frame_id: self.last_command_frame_id,
-            tool_pos_m: reading.tool_m.as_vec3().to_array(),
-            tool_yaw_rad: reading.yaw_rad() as f32,
-            joints_rad: reading.q_rad.map(|q| q as f32),
-            gripper_width_m: reading.gripper_width_m() as f32,
+            tool_pos_m: if finite { reading.tool_m.as_vec3().to_array() } else { [0.0; 3] },
+            tool_yaw_rad: if finite { reading.yaw_rad() as f32 } else { 0.0 },
+            joints_rad: if finite { reading.q_rad.map(|q| q as f32) } else { [0.0; 5] },
+            gripper_width_m: if finite { reading.gripper_width_m().max(0.0) as f32 } else { 0.0 },
             reject: self.reject as u32,
             fault: self.fault,
         }
@@ -493,6 +505,39 @@ fn profile_1d(x: f64, v: f64, goal: f64, vmax: f64, a: f64, dt: f64) -> (f64, f6
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DMat3;
+    use handeye_wire::message::WireMessage;
+
+    fn reading_at(pose: ToolPose) -> ArmReading {
+        let q = ik(pose).unwrap();
+        let arm = crate::kinematics::fk(&q);
+        ArmReading {
+            q_rad: q,
+            dq_radps: [0.0; 5],
+            finger_m: [0.04; 2],
+            finger_vel_mps: [0.0; 2],
+            tool_m: arm.tool_m,
+            palm_rot: arm.palm_rot,
+        }
+    }
+
+    #[test]
+    fn published_state_is_always_a_valid_wire_message() {
+        let home = ToolPose { pos_m: DVec3::new(0.3, 0.0, 0.18), yaw_rad: 0.0 };
+        let mut c = Controller::new(ControllerConfig::default(), home).unwrap();
+        let mut r = reading_at(home);
+        r.finger_m = [-1e-5, -2e-5]; // closed jaws read a hair below their limit
+        let s = c.state(1, &r);
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!(s.gripper_width_m, 0.0);
+        r.tool_m.x = f64::NAN; // physics blew up
+        r.palm_rot = DMat3::IDENTITY;
+        let s = c.state(2, &r);
+        assert_eq!(s.validate(), Ok(()), "{s:?}");
+        assert_eq!(s.fault, fault::PHYSICS);
+        assert_ne!(s.flags & robot_flags::FAULT, 0);
+        assert_eq!(s.seq, 2);
+    }
 
     #[test]
     fn profile_respects_speed_and_acceleration_and_lands_exactly() {

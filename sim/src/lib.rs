@@ -17,6 +17,7 @@ pub mod scenario;
 pub mod scene;
 pub mod script;
 pub mod simulator;
+pub mod transport;
 pub mod truth;
 pub mod world;
 

@@ -31,13 +31,17 @@ pub enum RunError {
     Render(#[from] RenderError),
     #[error("transport: {0}")]
     Transport(String),
+    /// SIGINT/SIGTERM: the run ends cleanly.
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// Carries frames and robot state out and commands in.
 pub trait Transport {
     /// Publishes one frame; `fill` renders it into the payload buffer it is given
-    /// (`2 * width * height` bytes, left rows then right rows).
-    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<(), RunError>;
+    /// (`2 * width * height` bytes, left rows then right rows). Returns the frame id the
+    /// frame went out with (what a lockstep reply must carry).
+    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<u64, RunError>;
     fn publish_state(&mut self, state: &RobotState) -> Result<(), RunError>;
     /// Appends the commands that have arrived (without blocking).
     fn receive_commands(&mut self, out: &mut Vec<RobotCommand>) -> Result<(), RunError>;
@@ -45,6 +49,10 @@ pub trait Transport {
     fn wait_for_commands(&mut self, timeout: Duration) -> Result<(), RunError>;
     /// Whether anyone publishes commands (a daemon is attached).
     fn daemon_attached(&mut self) -> bool;
+    /// Whether the process was asked to stop (SIGINT/SIGTERM).
+    fn interrupted(&self) -> bool {
+        false
+    }
 }
 
 /// A transport that carries nothing: frames are rendered (and hashed) but go nowhere, and
@@ -66,10 +74,10 @@ impl Default for NoTransport {
 }
 
 impl Transport for NoTransport {
-    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<(), RunError> {
+    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<u64, RunError> {
         self.buffer.resize((meta.width * meta.height * 2) as usize, 0);
         fill(&mut self.buffer)?;
-        Ok(())
+        Ok(meta.frame_id)
     }
     fn publish_state(&mut self, _: &RobotState) -> Result<(), RunError> {
         Ok(())
@@ -124,13 +132,31 @@ impl Runner {
         Ok(())
     }
 
-    /// Renders and publishes the current frame and the robot state.
+    /// Renders and publishes the current frame and the robot state; the returned meta
+    /// carries the frame id the transport used.
     pub fn publish(&mut self, transport: &mut dyn Transport) -> Result<FrameMeta, RunError> {
-        let meta = self.meta();
-        transport.publish_frame(&meta, &mut |buf| self.render_into(buf))?;
+        let mut meta = self.meta();
+        meta.frame_id = transport.publish_frame(&meta, &mut |buf| self.render_into(buf))?;
         let state = self.sim.robot_state();
         transport.publish_state(&state)?;
         Ok(meta)
+    }
+
+    /// One frame period of physics, publishing the robot state after every step (the
+    /// controller reports once per control tick). `before_step` runs before each step.
+    fn step_frame_publishing(
+        &mut self,
+        transport: &mut dyn Transport,
+        mut before_step: impl FnMut(&mut Simulator, &mut dyn Transport) -> Result<(), RunError>,
+    ) -> Result<(), RunError> {
+        for _ in 0..self.sim.scenario.substeps_per_frame() {
+            before_step(&mut self.sim, transport)?;
+            self.sim.step();
+            let state = self.sim.robot_state();
+            transport.publish_state(&state)?;
+        }
+        self.sim.count_frame();
+        Ok(())
     }
 }
 
@@ -176,32 +202,41 @@ pub fn run_lockstep(runner: &mut Runner, transport: &mut dyn Transport, options:
     let start = Instant::now();
     let mut stats = RunStats::default();
     let mut commands = Vec::new();
-    while !done(runner, options, stats.frames) {
-        let meta = runner.publish(transport)?;
-        stats.frames += 1;
-        let deadline = Instant::now() + options.reply_timeout;
-        let mut answered = !transport.daemon_attached();
-        loop {
-            commands.clear();
-            transport.receive_commands(&mut commands)?;
-            for c in &commands {
-                runner.sim.command(c);
-                stats.commands += 1;
-                answered |= c.frame_id == meta.frame_id;
+    let result = (|| {
+        while !done(runner, options, stats.frames) && !transport.interrupted() {
+            let meta = runner.publish(transport)?;
+            stats.frames += 1;
+            let deadline = Instant::now() + options.reply_timeout;
+            let mut answered = !transport.daemon_attached();
+            loop {
+                commands.clear();
+                transport.receive_commands(&mut commands)?;
+                for c in &commands {
+                    runner.sim.command(c);
+                    stats.commands += 1;
+                    answered |= c.frame_id == meta.frame_id;
+                }
+                if answered {
+                    break;
+                }
+                let now = Instant::now();
+                if now >= deadline {
+                    stats.reply_timeouts += 1;
+                    break;
+                }
+                transport.wait_for_commands(deadline - now)?;
+                if !transport.daemon_attached() {
+                    break; // the daemon left while we waited
+                }
             }
-            if answered {
-                break;
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                stats.reply_timeouts += 1;
-                break;
-            }
-            transport.wait_for_commands(deadline - now)?;
+            runner.step_frame_publishing(transport, |_, _| Ok(()))?;
         }
-        runner.sim.step_frame();
+        Ok(())
+    })();
+    match result {
+        Ok(()) | Err(RunError::Interrupted) => finish(runner, stats, start),
+        Err(e) => Err(e),
     }
-    finish(runner, stats, start)
 }
 
 /// Real time: one frame per camera period of wall-clock time; commands are applied at the
@@ -212,34 +247,38 @@ pub fn run_realtime(runner: &mut Runner, transport: &mut dyn Transport, options:
     let mut stats = RunStats::default();
     let mut commands = Vec::new();
     let mut next = start;
-    while !done(runner, options, stats.frames) {
-        runner.publish(transport)?;
-        stats.frames += 1;
-        next += period;
-        // Physics substeps for this period, taking commands between them as they arrive.
-        for _ in 0..runner.sim.scenario.substeps_per_frame() {
-            commands.clear();
-            transport.receive_commands(&mut commands)?;
-            for c in &commands {
-                runner.sim.command(c);
-                stats.commands += 1;
+    let result = (|| {
+        while !done(runner, options, stats.frames) && !transport.interrupted() {
+            runner.publish(transport)?;
+            stats.frames += 1;
+            next += period;
+            let mut received = 0;
+            runner.step_frame_publishing(transport, |sim, transport| {
+                commands.clear();
+                transport.receive_commands(&mut commands)?;
+                for c in &commands {
+                    sim.command(c);
+                    received += 1;
+                }
+                Ok(())
+            })?;
+            stats.commands += received;
+            let now = Instant::now();
+            if now > next {
+                stats.late_frames += 1;
+                next = now; // a camera does not catch up in a burst
+            } else {
+                // Sleep until the next frame (commands that arrive meanwhile wait in the
+                // queue and act at the next step).
+                std::thread::sleep(next - now);
             }
-            runner.sim.step();
         }
-        runner.sim.count_frame();
-        let now = Instant::now();
-        if now > next {
-            stats.late_frames += 1;
-            next = now; // do not try to catch up with a burst
-        } else {
-            transport.wait_for_commands(next - now)?;
-            let rest = next.saturating_duration_since(Instant::now());
-            if !rest.is_zero() {
-                std::thread::sleep(rest);
-            }
-        }
+        Ok(())
+    })();
+    match result {
+        Ok(()) | Err(RunError::Interrupted) => finish(runner, stats, start),
+        Err(e) => Err(e),
     }
-    finish(runner, stats, start)
 }
 
 fn finish(runner: &Runner, mut stats: RunStats, start: Instant) -> Result<RunStats, RunError> {

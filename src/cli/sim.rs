@@ -6,14 +6,18 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Args;
 use handeye_sim::judge::Verdict;
-use handeye_sim::run::{NoTransport, RunOptions, Runner, run_lockstep, run_realtime};
+use handeye_sim::run::{RunOptions, Runner, run_lockstep, run_realtime};
+use handeye_sim::transport::WireTransport;
 use handeye_sim::{Scenario, Simulator};
+
+use super::domain::DomainArgs;
 
 /// Run the simulator: physics, the robot's controller and stereo rendering.
 ///
-/// Publishes one GRAY8 stereo sample per frame and the robot state, and takes robot
-/// commands, like a real camera pair and robot would (see wire/README.md). Ground truth stays
-/// inside; the success verdict is printed at the end.
+/// Publishes one GRAY8 stereo sample per frame on handeye/stereo and the robot state (every
+/// control tick) on handeye/robot/state, and takes commands from handeye/robot/command, like
+/// a real camera pair and robot would (see wire/README.md). Ground truth stays inside; the
+/// success verdict is printed at the end.
 ///
 /// Modes:
 ///   --lockstep   publish frame N, wait for the daemon's command stamped N (or
@@ -42,9 +46,11 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 1000)]
     reply_timeout_ms: u64,
     /// Print one JSON object at the end: frames, fps, frames_hash (a hash over every
-    /// published pixel), verdict, and more.
+    /// published pixel, hex), commands, reply_timeouts, verdict, and more.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    domain: DomainArgs,
 }
 
 /// Mesa's Vulkan driver complains on stderr when XDG_RUNTIME_DIR is unset (it probes for a
@@ -81,10 +87,16 @@ pub fn run(args: SimArgs) -> Result<()> {
         reply_timeout: Duration::from_millis(args.reply_timeout_ms),
         stop_on_success: !args.no_stop_on_success,
     };
-    // The iceoryx2 transport (handeye-wire) is wired in once it lands; until then frames are
-    // rendered and hashed but not sent, and no commands arrive.
-    let mut transport = NoTransport::new();
-    let transport_name = "none (wire transport not merged yet)";
+    let (w, h) = (runner.renderer.width(), runner.renderer.height());
+    let mut transport = WireTransport::new(&args.domain.domain, w, h)?;
+    if !args.json {
+        eprintln!(
+            "sim: {name} on handeye/stereo + handeye/robot/* in domain '{}' ({}, 2 x {w}x{h} GRAY8 at {} frames/s of simulated time)",
+            transport.domain(),
+            if args.lockstep { "lockstep" } else { "real time" },
+            runner.sim.scenario.render.frame_rate_hz
+        );
+    }
     let stats = if args.lockstep {
         run_lockstep(&mut runner, &mut transport, &options)?
     } else {
@@ -111,7 +123,8 @@ pub fn run(args: SimArgs) -> Result<()> {
             "verdict": verdict,
             "max_lift_mm": runner.sim.judge().max_lift_m * 1e3,
             "adapter": adapter,
-            "transport": transport_name,
+            "domain": transport.domain().to_string(),
+            "commands_rejected": transport.command_stats().rejected_total(),
         });
         println!("{out}");
     } else {

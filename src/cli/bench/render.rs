@@ -5,15 +5,19 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use handeye_sim::run::{NoTransport, Runner, Transport};
+use handeye_sim::run::{Runner, Transport};
+use handeye_sim::transport::WireTransport;
+use handeye_wire::Domain;
 use handeye_sim::script::GroundTruthPick;
 use handeye_sim::{Scenario, Simulator};
 
 /// Measure the simulator's lockstep frame rate: physics + render + publish per stereo frame.
 ///
 /// Runs the scenario in lockstep with the arm driven by a scripted pick (so physics includes
-/// a moving arm, contacts and a grasp), renders both views every frame and hands them to the
-/// publisher. Prints stereo frames per second and the time per stage. Use a release build:
+/// a moving arm, contacts and a grasp), renders both views every frame straight into a
+/// loaned shared-memory sample and publishes it on handeye/stereo (with the robot state every
+/// control tick), in a private domain with no daemon attached. Prints stereo frames per second
+/// and the time per stage. Use a release build:
 ///
 ///   cargo run --release -- bench render scenarios/pick_cube.toml --json
 ///
@@ -44,7 +48,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let adapter = runner.renderer.adapter();
     let target = runner.sim.target_index();
     let mut script = GroundTruthPick::new(&runner.sim, target, 0.07, 1e6);
-    let mut transport = NoTransport::new();
+    let domain = Domain::unique("bench-render");
+    let mut transport = WireTransport::new(&domain, runner.renderer.width(), runner.renderer.height())?;
     let (mut publish_s, mut physics_s) = (0.0, 0.0);
     let mut measured = 0u64;
     let mut start = Instant::now();
@@ -60,7 +65,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
             let cmd = script.next_command(&mut runner.sim, n);
             runner.sim.command(&cmd);
         }
-        runner.sim.step_frame();
+        for _ in 0..runner.sim.scenario.substeps_per_frame() {
+            runner.sim.step();
+            let state = runner.sim.robot_state();
+            transport.publish_state(&state)?;
+        }
+        runner.sim.count_frame();
         let t2 = Instant::now();
         publish_s += (t1 - t0).as_secs_f64();
         physics_s += (t2 - t1).as_secs_f64();
@@ -69,6 +79,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
     }
     let wall = start.elapsed().as_secs_f64();
+    drop(transport);
+    let _ = handeye_wire::domain::remove_domain_files(&domain);
     let fps = measured as f64 / wall;
     let per = |s: f64| s * 1e3 / measured.max(1) as f64;
     if args.json {
@@ -78,17 +90,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "stereo_fps": fps,
             "ms_per_frame": per(wall),
             "render_publish_ms": per(publish_s),
-            "physics_ms": per(physics_s),
+            "physics_state_ms": per(physics_s),
             "physics_steps_per_frame": runner.sim.scenario.substeps_per_frame(),
             "width": runner.renderer.width(),
             "height": runner.renderer.height(),
             "adapter": adapter,
-            "transport": "none (frames rendered and hashed, not sent)",
+            "transport": "iceoryx2 handeye/stereo + handeye/robot/state, private domain, no subscribers",
         });
         println!("{out}");
     } else {
         println!("scenario {name}: {measured} stereo frames {}x{} x2 in {wall:.2} s", runner.renderer.width(), runner.renderer.height());
-        println!("  {fps:.1} stereo frames/s ({:.2} ms/frame: render+publish {:.2} ms, physics {:.2} ms for {} steps)",
+        println!("  {fps:.1} stereo frames/s ({:.2} ms/frame: render+publish {:.2} ms, physics+state {:.2} ms for {} steps)",
             per(wall), per(publish_s), per(physics_s), runner.sim.scenario.substeps_per_frame());
         println!("  adapter: {adapter}");
     }

@@ -1,0 +1,131 @@
+//! The simulator on the shared-memory services (`wire/README.md`): it publishes stereo frames
+//! on `handeye/stereo` (rendered straight into the loaned sample) and the robot state on
+//! `handeye/robot/state`, and takes commands from `handeye/robot/command`, exactly as a
+//! camera pair and a robot controller would.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
+use handeye_wire::stereo::{Delivery, StereoGeometry, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::{Domain, RobotCommand, RobotState, WireNode, monotonic_ns};
+
+use crate::render::RenderError;
+use crate::run::{FrameMeta, RunError, Transport};
+
+/// Why the services could not be joined.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    #[error(transparent)]
+    Node(#[from] handeye_wire::NodeError),
+    #[error(transparent)]
+    Stereo(#[from] handeye_wire::stereo::StereoPublisherError),
+    #[error(transparent)]
+    Message(#[from] handeye_wire::message::MessagePortError),
+}
+
+/// Publisher of frames and state, subscriber of commands, in one domain.
+pub struct WireTransport {
+    // Ports before the node: they are dropped first.
+    frames: StereoPublisher,
+    state: MessagePublisher<RobotState>,
+    commands: MessageSubscriber<RobotCommand>,
+    /// Commands taken out of the subscriber while waiting, not yet handed over.
+    pending: VecDeque<RobotCommand>,
+    node: WireNode,
+    geometry: StereoGeometry,
+}
+
+impl WireTransport {
+    /// Joins `domain` as the camera pair (`width` x `height` GRAY8 views) and the robot.
+    pub fn new(domain: &Domain, width: u32, height: u32) -> Result<Self, TransportError> {
+        let node = WireNode::create(domain, "handeye-sim")?;
+        let geometry = StereoGeometry::gray8_pair(width, height);
+        // Latest-frame delivery, like a camera: in lockstep the simulator waits for the
+        // daemon's reply to each frame anyway, so the daemon never falls behind.
+        let frames = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery: Delivery::Latest, ..Default::default() })?;
+        let state = MessagePublisher::<RobotState>::create(&node)?;
+        let commands = MessageSubscriber::<RobotCommand>::create(&node)?;
+        Ok(Self { frames, state, commands, pending: VecDeque::new(), node, geometry })
+    }
+
+    /// The domain joined.
+    pub fn domain(&self) -> &Domain {
+        self.node.domain()
+    }
+
+    /// Counters of the command subscriber (received, rejected by reason).
+    pub fn command_stats(&self) -> &handeye_wire::message::MessageStats {
+        self.commands.stats()
+    }
+
+    /// Number of subscribers of the stereo service now.
+    pub fn frame_subscribers(&self) -> usize {
+        self.frames.subscriber_count()
+    }
+
+    /// Drains liveness events and messages that are due, without blocking.
+    fn poll(&mut self) -> Result<(), RunError> {
+        loop {
+            match self.commands.wait(Duration::ZERO).map_err(|e| RunError::Transport(e.to_string()))? {
+                MessageEvent::Message(m) => self.pending.push_back(m),
+                MessageEvent::PublisherUp => tracing::info!("a command publisher (daemon) attached"),
+                MessageEvent::PublisherGone => tracing::info!("the command publisher (daemon) left"),
+                MessageEvent::Timeout => return Ok(()),
+                MessageEvent::Interrupted => return Err(RunError::Interrupted),
+            }
+        }
+    }
+}
+
+impl Transport for WireTransport {
+    fn publish_frame(&mut self, _meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<u64, RunError> {
+        let mut rendered = Ok(());
+        let frame_id = self
+            .frames
+            .publish(monotonic_ns(), |payload| {
+                // The geometry is tightly packed (stride = width): the renderer's layout.
+                debug_assert_eq!(payload.len(), (self.geometry.width * self.geometry.height * 2) as usize);
+                rendered = fill(payload);
+            })
+            .map_err(|e| match e {
+                handeye_wire::stereo::PublishError::Interrupted => RunError::Interrupted,
+                e => RunError::Transport(e.to_string()),
+            })?;
+        rendered?;
+        Ok(frame_id)
+    }
+
+    fn publish_state(&mut self, state: &RobotState) -> Result<(), RunError> {
+        self.state.send(state).map(|_| ()).map_err(|e| RunError::Transport(e.to_string()))
+    }
+
+    fn receive_commands(&mut self, out: &mut Vec<RobotCommand>) -> Result<(), RunError> {
+        self.poll()?;
+        out.extend(self.pending.drain(..));
+        Ok(())
+    }
+
+    fn wait_for_commands(&mut self, timeout: Duration) -> Result<(), RunError> {
+        if !self.pending.is_empty() {
+            return Ok(());
+        }
+        match self.commands.wait(timeout).map_err(|e| RunError::Transport(e.to_string()))? {
+            MessageEvent::Message(m) => self.pending.push_back(m),
+            MessageEvent::Interrupted => return Err(RunError::Interrupted),
+            MessageEvent::PublisherUp | MessageEvent::PublisherGone | MessageEvent::Timeout => {}
+        }
+        Ok(())
+    }
+
+    fn daemon_attached(&mut self) -> bool {
+        if self.poll().is_err() {
+            return false;
+        }
+        self.commands.publisher_alive() == Some(true)
+    }
+
+    fn interrupted(&self) -> bool {
+        self.node.termination_requested()
+    }
+}
