@@ -70,13 +70,13 @@ fn the_seed_changes_the_sensor_noise_and_nothing_else_changes_without_it() {
 fn lockstep_loop_without_a_daemon_steps_on_and_hashes_every_frame() {
     let mut runner = Runner::new(Simulator::new(scenario("clutter3.toml")).expect("simulator")).expect("renderer");
     let options = RunOptions { frames: Some(12), reply_timeout: std::time::Duration::from_secs(5), stop_on_success: false };
-    let stats = run_lockstep(&mut runner, &mut NoTransport::new(), &options).expect("run");
+    let stats = run_lockstep(&mut runner, &mut NoTransport::new(), &options, None).expect("run");
     assert_eq!(stats.frames, 12);
     assert_eq!(stats.reply_timeouts, 0, "no daemon attached: no waiting");
     assert_eq!(runner.sim.frames(), 12);
     assert_eq!(runner.hash.frames, 12);
     // Same again gives the same hash.
     let mut again = Runner::new(Simulator::new(scenario("clutter3.toml")).expect("simulator")).expect("renderer");
-    let stats2 = run_lockstep(&mut again, &mut NoTransport::new(), &options).expect("run");
+    let stats2 = run_lockstep(&mut again, &mut NoTransport::new(), &options, None).expect("run");
     assert_eq!(stats.frames_hash, stats2.frames_hash);
 }

@@ -93,6 +93,19 @@ impl Transport for NoTransport {
     }
 }
 
+/// An in-process source of commands that answers every frame (instead of a daemon on the
+/// transport): the ground-truth scripted pick ([`crate::script::GroundTruthPick`]) is one.
+pub trait Driver {
+    /// The command answering frame `frame_id`, or `None` to send nothing.
+    fn command(&mut self, sim: &mut Simulator, frame_id: u64) -> Option<RobotCommand>;
+}
+
+impl Driver for crate::script::GroundTruthPick {
+    fn command(&mut self, sim: &mut Simulator, frame_id: u64) -> Option<RobotCommand> {
+        Some(self.next_command(sim, frame_id))
+    }
+}
+
 /// Simulation + rendering + the hash over every published pixel.
 pub struct Runner {
     pub sim: Simulator,
@@ -198,7 +211,14 @@ fn done(runner: &Runner, options: &RunOptions, published: u64) -> bool {
 
 /// Lockstep: publish frame N, wait for a command stamped N (or the time-out; at once if no
 /// daemon is attached), apply the commands, step one frame period. Deterministic for a seed.
-pub fn run_lockstep(runner: &mut Runner, transport: &mut dyn Transport, options: &RunOptions) -> Result<RunStats, RunError> {
+/// With a `driver`, its command answers each frame and nothing waits for the transport
+/// (commands arriving there, e.g. an operator's Stop, still apply).
+pub fn run_lockstep(
+    runner: &mut Runner,
+    transport: &mut dyn Transport,
+    options: &RunOptions,
+    mut driver: Option<&mut dyn Driver>,
+) -> Result<RunStats, RunError> {
     let start = Instant::now();
     let mut stats = RunStats::default();
     let mut commands = Vec::new();
@@ -207,7 +227,13 @@ pub fn run_lockstep(runner: &mut Runner, transport: &mut dyn Transport, options:
             let meta = runner.publish(transport)?;
             stats.frames += 1;
             let deadline = Instant::now() + options.reply_timeout;
-            let mut answered = !transport.daemon_attached();
+            let mut answered = driver.is_some() || !transport.daemon_attached();
+            if let Some(d) = driver.as_mut()
+                && let Some(c) = d.command(&mut runner.sim, meta.frame_id)
+            {
+                runner.sim.command(&c);
+                stats.commands += 1;
+            }
             loop {
                 commands.clear();
                 transport.receive_commands(&mut commands)?;
@@ -240,8 +266,13 @@ pub fn run_lockstep(runner: &mut Runner, transport: &mut dyn Transport, options:
 }
 
 /// Real time: one frame per camera period of wall-clock time; commands are applied at the
-/// next physics step after they arrive.
-pub fn run_realtime(runner: &mut Runner, transport: &mut dyn Transport, options: &RunOptions) -> Result<RunStats, RunError> {
+/// next physics step after they arrive. A `driver` answers each frame as it is published.
+pub fn run_realtime(
+    runner: &mut Runner,
+    transport: &mut dyn Transport,
+    options: &RunOptions,
+    mut driver: Option<&mut dyn Driver>,
+) -> Result<RunStats, RunError> {
     let start = Instant::now();
     let period = Duration::from_secs_f64(1.0 / f64::from(runner.sim.scenario.render.frame_rate_hz));
     let mut stats = RunStats::default();
@@ -249,10 +280,16 @@ pub fn run_realtime(runner: &mut Runner, transport: &mut dyn Transport, options:
     let mut next = start;
     let result = (|| {
         while !done(runner, options, stats.frames) && !transport.interrupted() {
-            runner.publish(transport)?;
+            let meta = runner.publish(transport)?;
             stats.frames += 1;
             next += period;
             let mut received = 0;
+            if let Some(d) = driver.as_mut()
+                && let Some(c) = d.command(&mut runner.sim, meta.frame_id)
+            {
+                runner.sim.command(&c);
+                received += 1;
+            }
             runner.step_frame_publishing(transport, |sim, transport| {
                 commands.clear();
                 transport.receive_commands(&mut commands)?;

@@ -6,7 +6,8 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Args;
 use handeye_sim::judge::Verdict;
-use handeye_sim::run::{RunOptions, Runner, run_lockstep, run_realtime};
+use handeye_sim::run::{Driver, RunOptions, Runner, run_lockstep, run_realtime};
+use handeye_sim::script::GroundTruthPick;
 use handeye_sim::transport::WireTransport;
 use handeye_sim::{Scenario, Simulator};
 
@@ -45,6 +46,12 @@ pub struct SimArgs {
     /// Lockstep: longest wait for the daemon's command for a frame, milliseconds.
     #[arg(long, default_value_t = 1000)]
     reply_timeout_ms: u64,
+    /// Drive the arm with a scripted pick that reads the target's pose from ground truth
+    /// (open, approach, descend, close, lift 70 mm, hold). A physics demo, not vision: it
+    /// shows the arm and gripper can pick the block; the daemon has to find it with cameras.
+    /// Its command answers every frame, so no daemon is waited for.
+    #[arg(long)]
+    scripted_pick: bool,
     /// Print one JSON object at the end: frames, fps, frames_hash (a hash over every
     /// published pixel, hex), commands, reply_timeouts, verdict, and more.
     #[arg(long)]
@@ -97,10 +104,16 @@ pub fn run(args: SimArgs) -> Result<()> {
             runner.sim.scenario.render.frame_rate_hz
         );
     }
+    let mut script = args.scripted_pick.then(|| {
+        let target = runner.sim.target_index();
+        let hold_s = runner.sim.scenario.success.hold_s + 1.0;
+        GroundTruthPick::new(&runner.sim, target, 0.07, hold_s)
+    });
+    let driver = script.as_mut().map(|s| s as &mut dyn Driver);
     let stats = if args.lockstep {
-        run_lockstep(&mut runner, &mut transport, &options)?
+        run_lockstep(&mut runner, &mut transport, &options, driver)?
     } else {
-        run_realtime(&mut runner, &mut transport, &options)?
+        run_realtime(&mut runner, &mut transport, &options, driver)?
     };
     let verdict = runner.sim.verdict();
     let verdict_text = match verdict {
@@ -121,6 +134,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             "reply_timeouts": stats.reply_timeouts,
             "late_frames": stats.late_frames,
             "verdict": verdict,
+            "driver": if args.scripted_pick { "scripted pick from ground truth (physics demo)" } else { "commands from handeye/robot/command" },
             "max_lift_mm": runner.sim.judge().max_lift_m * 1e3,
             "adapter": adapter,
             "domain": transport.domain().to_string(),

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 use handeye_sim::render::Renderer;
+use handeye_sim::script::GroundTruthPick;
 use handeye_sim::truth::{CageTruth, GroundTruth};
 use handeye_sim::{Scenario, Simulator};
 
@@ -28,17 +29,28 @@ pub struct SnapshotArgs {
     /// Output directory (created if missing).
     #[arg(long)]
     out: PathBuf,
-    /// Simulate this many frames (1/frame_rate_hz s each, arm holding still) before rendering,
-    /// e.g. to let events fire.
+    /// Simulate this many frames (1/frame_rate_hz s each) before rendering, e.g. to let
+    /// events fire. The arm holds still unless --scripted-pick.
     #[arg(long, default_value_t = 0)]
     frames: u64,
+    /// During those frames, drive the arm with the scripted pick that reads the target's pose
+    /// from ground truth (a physics demo, not vision), e.g. `--frames 170` shows the target
+    /// lifted in the gripper.
+    #[arg(long)]
+    scripted_pick: bool,
 }
 
 pub fn run(args: SnapshotArgs) -> Result<()> {
     crate::cli::sim::quiet_mesa();
     let scenario = Scenario::load(&args.scenario)?;
     let mut sim = Simulator::new(scenario)?;
-    for _ in 0..args.frames {
+    let target = sim.target_index();
+    let mut script = args.scripted_pick.then(|| GroundTruthPick::new(&sim, target, 0.07, 1e6));
+    for n in 0..args.frames {
+        if let Some(s) = script.as_mut() {
+            let cmd = s.next_command(&mut sim, n);
+            sim.command(&cmd);
+        }
         sim.step_frame();
     }
     let mut renderer = Renderer::for_scene(&sim.scene, &sim.events.cameras).context("starting the renderer")?;
