@@ -103,9 +103,9 @@ fn edge_offsets(img: &Gray, a: [f64; 2], b: [f64; 2], min_contrast: f64) -> Vec<
             hi += 1;
         }
         let (mut sw, mut sws) = (0.0, 0.0);
-        for j in lo..=hi {
-            sw += g[j];
-            sws += g[j] * s_of(j);
+        for (j, &gj) in g.iter().enumerate().take(hi + 1).skip(lo) {
+            sw += gj;
+            sws += gj * s_of(j);
         }
         out.push(sws / sw);
     }

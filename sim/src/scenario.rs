@@ -364,7 +364,7 @@ impl Scenario {
             return Err((p(&[K("physics"), K("gravity_mps2")]), "must be 0..30 m/s²".into()));
         }
         let fr = self.render.frame_rate_hz;
-        if fr == 0 || self.physics.rate_hz % fr != 0 {
+        if fr == 0 || !self.physics.rate_hz.is_multiple_of(fr) {
             return Err((
                 p(&[K("render"), K("frame_rate_hz")]),
                 format!("must divide physics.rate_hz = {} (whole physics steps per frame)", self.physics.rate_hz),
