@@ -1,0 +1,454 @@
+//! Scenario files: the work cell, the cameras, the task and the scripted disturbances.
+//!
+//! A scenario is a TOML file (see `scenarios/*.toml` and `sim/README.md`). Every table rejects
+//! unknown keys and every required key must be present; errors name the file, the line and
+//! column, and the field path (`blocks[1].size_mm`), e.g.
+//!
+//! ```text
+//! scenarios/bad.toml:14:1: blocks[0]: unknown field `colour`, expected one of `name`, `kind`, ...
+//! ```
+//!
+//! All positions are in the robot frame: metres, z up, origin at the arm's base on the table
+//! top (the table top is the plane z = 0). The arm's base therefore sits at the origin by
+//! definition; the table, blocks and cameras are placed relative to it.
+
+mod locate;
+mod validate;
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::de::DeTable;
+
+use crate::geometry::BlockKind;
+use locate::{error_at, path_at, path_string, span_of};
+
+/// A whole scenario, as read from its file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name, used in reports.
+    pub name: String,
+    /// One or two sentences on what the scenario exercises.
+    #[serde(default)]
+    pub description: String,
+    /// Seed of every random choice (shades, sensor noise).
+    pub seed: u64,
+    pub physics: Physics,
+    pub render: Render,
+    pub table: Table,
+    pub light: Light,
+    pub arm: ArmConfig,
+    /// Exactly two: `[[cameras]]` left then right.
+    pub cameras: Vec<CameraConfig>,
+    pub blocks: Vec<BlockConfig>,
+    pub cage: Cage,
+    pub task: Task,
+    pub success: SuccessRule,
+    #[serde(default)]
+    pub events: Vec<Event>,
+}
+
+/// `[physics]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Physics {
+    /// Physics steps per simulated second (the controller ticks at this rate too).
+    pub rate_hz: u32,
+    /// Gravity along -z, m/s².
+    #[serde(default = "default_gravity")]
+    pub gravity_mps2: f64,
+}
+
+fn default_gravity() -> f64 {
+    9.81
+}
+
+/// `[render]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Render {
+    /// Stereo frames per simulated second; must divide `physics.rate_hz`.
+    pub frame_rate_hz: u32,
+    /// Grey level of the background behind the table, 0..1.
+    pub background: f64,
+}
+
+/// `[table]`: a box whose top face is the plane z = 0.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Table {
+    /// Centre of the table top, x and y, metres.
+    pub center_m: [f64; 2],
+    /// Length (x) and width (y) of the table top, metres.
+    pub size_m: [f64; 2],
+    /// Albedo of the table top, 0..1.
+    pub shade: f64,
+    /// Coulomb friction coefficient.
+    #[serde(default = "default_table_friction")]
+    pub friction: f64,
+}
+
+fn default_table_friction() -> f64 {
+    0.8
+}
+
+/// `[light]`: one directional light plus ambient light.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Light {
+    /// Direction from the scene towards the light (any length but zero).
+    pub direction: [f64; 3],
+    /// Brightness of the directional light, 0..2.
+    pub intensity: f64,
+    /// Ambient light, 0..1.
+    pub ambient: f64,
+}
+
+/// `[arm]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArmConfig {
+    /// Tool point at start, metres (robot frame).
+    pub home_m: [f64; 3],
+    /// Tool yaw at start, degrees.
+    #[serde(default)]
+    pub home_yaw_deg: f64,
+    /// Default tool speed limit when a command gives none, m/s.
+    #[serde(default = "default_speed")]
+    pub default_speed_mps: f64,
+}
+
+fn default_speed() -> f64 {
+    0.15
+}
+
+/// `[[cameras]]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraConfig {
+    /// `left` or `right` (the left camera is the first image of a stereo sample).
+    pub name: String,
+    /// Optical centre, metres.
+    pub position_m: [f64; 3],
+    /// The point the optical axis passes through, metres.
+    pub look_at_m: [f64; 3],
+    /// World direction that appears up in the image; default +z.
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    /// Focal length in pixels. Give this or `vfov_deg`.
+    pub focal_px: Option<f64>,
+    /// Vertical field of view, degrees. Give this or `focal_px`.
+    pub vfov_deg: Option<f64>,
+    /// Width and height in pixels (both cameras must agree).
+    pub resolution: [u32; 2],
+    /// Standard deviation of additive Gaussian sensor noise, grey levels (0..255 scale).
+    #[serde(default)]
+    pub noise_sigma: f64,
+    /// Standard deviation of the Gaussian optical blur, pixels (0 = sharp, at most 2).
+    #[serde(default)]
+    pub blur_sigma_px: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// `[[blocks]]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlockConfig {
+    /// Unique name; tasks and events refer to blocks by it.
+    pub name: String,
+    pub kind: BlockKind,
+    /// Bounding box in the block frame (x, y, z), millimetres, each 20..60.
+    pub size_mm: [f64; 3],
+    /// Centre of the block's footprint on the table, metres; the block rests on the table.
+    pub position_m: [f64; 2],
+    /// Rotation about z, degrees.
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Albedo per face (see `sim/README.md` for the face order of each kind), 0..1.
+    /// Leave out for seeded random shades.
+    pub shades: Option<Vec<f64>>,
+    /// Seed of the random shades (when `shades` is absent); default derives from the
+    /// scenario seed and the block's index.
+    pub shade_seed: Option<u64>,
+    /// kg/m³.
+    #[serde(default = "default_density")]
+    pub density_kg_m3: f64,
+    #[serde(default = "default_block_friction")]
+    pub friction: f64,
+}
+
+fn default_density() -> f64 {
+    600.0
+}
+
+fn default_block_friction() -> f64 {
+    0.9
+}
+
+/// `[cage]`: the eight points the gripper visits to calibrate the cameras.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cage {
+    /// Exactly eight tool positions, metres (robot frame).
+    pub points_m: Vec<[f64; 3]>,
+}
+
+/// `[task]`: what to pick. Give `target` or `point_m`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Task {
+    /// Name of the block to pick.
+    pub target: Option<String>,
+    /// A point on the working plane (x, y, metres) indicated by the operator; the block
+    /// nearest to it is the target.
+    pub point_m: Option<[f64; 2]>,
+}
+
+/// `[success]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuccessRule {
+    /// The target must rise at least this far above its resting height, millimetres.
+    pub lift_mm: f64,
+    /// ... and stay there this long, seconds.
+    pub hold_s: f64,
+    /// The run fails if not done by then, seconds of simulated time.
+    #[serde(default = "default_timeout")]
+    pub timeout_s: f64,
+}
+
+fn default_timeout() -> f64 {
+    120.0
+}
+
+/// `[[events]]`: a scripted disturbance (`kind = "..."`), starting at `at_s` seconds of
+/// simulated time.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Event {
+    /// A camera is knocked: it turns about its own axes (x right, y down, z forward) by
+    /// `rotate_deg` (a rotation vector) and moves by `translate_mm` (camera axes).
+    CameraBump {
+        at_s: f64,
+        camera: String,
+        #[serde(default)]
+        rotate_deg: [f64; 3],
+        #[serde(default)]
+        translate_mm: [f64; 3],
+    },
+    /// A block is pushed: moved by `translate_mm` (x, y) and turned by `rotate_deg` about z.
+    TargetNudge {
+        at_s: f64,
+        block: String,
+        #[serde(default)]
+        translate_mm: [f64; 2],
+        #[serde(default)]
+        rotate_deg: f64,
+    },
+    /// A box (visible only, it touches nothing) crosses the scene from `from_m` to `to_m`
+    /// in `duration_s` seconds.
+    Occluder {
+        at_s: f64,
+        duration_s: f64,
+        from_m: [f64; 3],
+        to_m: [f64; 3],
+        size_mm: [f64; 3],
+        shade: f64,
+    },
+    /// The lighting changes to new values over `ramp_s` seconds (0 = at once).
+    LightChange {
+        at_s: f64,
+        #[serde(default)]
+        ramp_s: f64,
+        intensity: f64,
+        ambient: f64,
+        direction: Option<[f64; 3]>,
+    },
+}
+
+impl Event {
+    /// When the event starts, seconds of simulated time.
+    pub fn at_s(&self) -> f64 {
+        match self {
+            Self::CameraBump { at_s, .. }
+            | Self::TargetNudge { at_s, .. }
+            | Self::Occluder { at_s, .. }
+            | Self::LightChange { at_s, .. } => *at_s,
+        }
+    }
+}
+
+/// A scenario that could not be read. Displays as `file:line:column: field: message`.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{}:{line}:{column}: {field}: {message}", file.display())]
+pub struct ScenarioError {
+    pub file: PathBuf,
+    /// 1-based; 0 when unknown.
+    pub line: usize,
+    /// 1-based; 0 when unknown.
+    pub column: usize,
+    /// Dotted path of the offending field, e.g. `blocks[1].size_mm`; `(file)` for the file.
+    pub field: String,
+    pub message: String,
+}
+
+impl Scenario {
+    /// Reads and validates a scenario file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ScenarioError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+            file: path.to_path_buf(),
+            line: 0,
+            column: 0,
+            field: "(file)".into(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates scenario text; `file` is used in error messages only.
+    ///
+    /// ```
+    /// let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/pick_cube.toml")).unwrap();
+    /// let bad = text.replace("seed =", "sead =");
+    /// let err = handeye_sim::scenario::Scenario::parse(&bad, "pick_cube.toml".as_ref()).unwrap_err();
+    /// assert!(err.to_string().contains("sead"), "{err}");
+    /// ```
+    pub fn parse(text: &str, file: &Path) -> Result<Self, ScenarioError> {
+        let doc = DeTable::parse(text).map_err(|e| error_at(file, text, None, e.span(), e.message()))?;
+        let scenario: Scenario = toml::from_str(text).map_err(|e| {
+            let field = e.span().map(|s| path_at(&doc, s.start)).unwrap_or_default();
+            error_at(file, text, Some(field), e.span(), e.message())
+        })?;
+        scenario.validate().map_err(|(path, message)| {
+            let span = span_of(&doc, &path);
+            error_at(file, text, Some(path_string(&path)), span, &message)
+        })?;
+        Ok(scenario)
+    }
+
+    /// Seconds of simulated time per physics step.
+    pub fn physics_dt_s(&self) -> f64 {
+        1.0 / f64::from(self.physics.rate_hz)
+    }
+
+    /// Physics steps per stereo frame.
+    pub fn substeps_per_frame(&self) -> u32 {
+        self.physics.rate_hz / self.render.frame_rate_hz
+    }
+
+    /// Index of the target block: the named one, or the one nearest the indicated point.
+    pub fn target_index(&self) -> usize {
+        if let Some(name) = &self.task.target {
+            return self.blocks.iter().position(|b| &b.name == name).unwrap_or(0);
+        }
+        let p = self.task.point_m.unwrap_or([0.0, 0.0]);
+        let d2 = |b: &BlockConfig| (b.position_m[0] - p[0]).powi(2) + (b.position_m[1] - p[1]).powi(2);
+        (0..self.blocks.len())
+            .min_by(|&a, &b| d2(&self.blocks[a]).total_cmp(&d2(&self.blocks[b])))
+            .unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PICK_CUBE: &str = include_str!("../../../scenarios/pick_cube.toml");
+
+    fn parse(text: &str) -> Result<Scenario, ScenarioError> {
+        Scenario::parse(text, Path::new("test.toml"))
+    }
+
+    fn line_of(text: &str, needle: &str) -> usize {
+        text.lines().position(|l| l.contains(needle)).expect("needle in text") + 1
+    }
+
+    #[test]
+    fn shipped_scenario_parses() {
+        let s = parse(PICK_CUBE).unwrap();
+        assert_eq!(s.cameras.len(), 2);
+        assert_eq!(s.substeps_per_frame(), 8);
+        assert_eq!(s.blocks[s.target_index()].name, "cube");
+    }
+
+    #[test]
+    fn unknown_field_names_field_and_line() {
+        let text = PICK_CUBE.replace("yaw_deg = 25.0", "yaw_deg = 25.0\ncolour = 3");
+        let e = parse(&text).unwrap_err();
+        assert!(e.message.contains("colour"), "{e}");
+        assert_eq!(e.line, line_of(&text, "colour"), "{e}");
+        assert!(e.field.starts_with("blocks[0]"), "{e}");
+    }
+
+    #[test]
+    fn missing_field_is_named() {
+        let text = PICK_CUBE.replace("rate_hz = 240", "");
+        let e = parse(&text).unwrap_err();
+        assert!(e.message.contains("rate_hz"), "{e}");
+        assert!(e.to_string().starts_with("test.toml:"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_names_field_path_and_line() {
+        let text = PICK_CUBE.replace("focal_px = 1800.0\nresolution = [640, 480]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]",
+            "focal_px = 1800.0\nresolution = [640, \"480\"]\nnoise_sigma = 1.5\nblur_sigma_px = 0.0\n\n[[blocks]]");
+        assert_ne!(text, PICK_CUBE);
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.line, line_of(&text, "\"480\""), "{e}");
+        assert!(e.field.contains("cameras[1].resolution"), "{e}");
+    }
+
+    #[test]
+    fn out_of_range_value_points_at_its_key() {
+        let text = PICK_CUBE.replace("size_mm = [40.0, 40.0, 40.0]", "size_mm = [40.0, 40.0, 80.0]");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.field, "blocks[0].size_mm", "{e}");
+        assert_eq!(e.line, line_of(&text, "size_mm"), "{e}");
+        assert!(e.message.contains("20..60"), "{e}");
+    }
+
+    #[test]
+    fn dangling_reference_and_bad_event_are_reported() {
+        let text = PICK_CUBE.replace("target = \"cube\"", "target = \"sphere\"");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.field, "task.target");
+        assert!(e.message.contains("sphere"));
+
+        let ev = format!("{PICK_CUBE}\n[[events]]\nat_s = 3.0\nkind = \"camera_bump\"\ncamera = \"middle\"\n");
+        let e = parse(&ev).unwrap_err();
+        assert_eq!(e.field, "events[0].camera", "{e}");
+        assert_eq!(e.line, line_of(&ev, "\"middle\""), "{e}");
+
+        let ev = format!("{PICK_CUBE}\n[[events]]\nat_s = 3.0\nkind = \"camera_bump\"\ncamera = \"left\"\nrotation = [1, 2, 3]\n");
+        let e = parse(&ev).unwrap_err();
+        assert!(e.message.contains("rotation"), "{e}");
+        assert_eq!(e.line, line_of(&ev, "at_s = 3.0") - 1, "{e}");
+
+        let ev = format!("{PICK_CUBE}\n[[events]]\nat_s = 3.0\nkind = \"earthquake\"\n");
+        let e = parse(&ev).unwrap_err();
+        assert!(e.message.contains("earthquake"), "{e}");
+    }
+
+    #[test]
+    fn syntax_error_has_a_line() {
+        let text = PICK_CUBE.replace("seed = 1", "seed = = 1");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.line, line_of(&text, "seed = = 1"), "{e}");
+    }
+
+    #[test]
+    fn camera_count_and_focal_rules() {
+        let one_cam = PICK_CUBE.split("[[cameras]]\nname = \"right\"").next().unwrap().to_string()
+            + &PICK_CUBE[PICK_CUBE.find("[[blocks]]").unwrap()..];
+        let e = parse(&one_cam).unwrap_err();
+        assert_eq!(e.field, "cameras");
+        let both = PICK_CUBE.replacen("focal_px = 1800.0", "focal_px = 1800.0\nvfov_deg = 20.0", 1);
+        let e = parse(&both).unwrap_err();
+        assert_eq!(e.field, "cameras[0]", "{e}");
+    }
+}
