@@ -9,14 +9,17 @@ use super::search::{Polarity, MAX_SEARCH_PX};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum EdgeSign {
     /// Two-sided: any sign.
+    #[default]
     Either,
     /// One-sided with one given polarity for the whole contour.
     Fixed(Polarity),
     /// One-sided with a polarity per point, learnt from the edges the point locks on to
     /// during the first updates (two-sided until then). A face boundary often changes sign
     /// along its length (printed texture, shading, background), which a single polarity
-    /// cannot express.
-    #[default]
+    /// cannot express. Beware: where a side stops being a silhouette (a neighbouring face
+    /// comes into view, an occluder passes) its true polarity flips, and a learnt one-sided
+    /// point then prefers the wrong edge; the default two-sided search with the appearance
+    /// cue ([`TrackerConfig::appearance_px_per_grey`]) handles that case better.
     Learned,
 }
 
@@ -45,13 +48,18 @@ pub struct TrackerConfig {
     pub model: DeformationModel,
     /// Robust weight function of the fit.
     pub loss: RobustLoss,
-    /// Reweighting iterations per pass.
+    /// Reweighting iterations of the first pass.
     pub iterations: usize,
+    /// Reweighting iterations of each refinement pass (it starts close to the answer).
+    pub refine_iterations: usize,
     /// Bounds of the robust scale, px.
     pub sigma_min_px: f64,
     pub sigma_max_px: f64,
     /// Ridge on the deformation (relative): damps deformation the edges do not constrain.
     pub deformation_ridge: f64,
+    /// Ridge on the perspective term of the projective model (relative): perspective changes
+    /// slowly on real objects, and unchecked it lets one side swing away on its own.
+    pub perspective_ridge: f64,
     /// A point is an inlier when its chosen edge is within this distance of the fit, px.
     pub inlier_px: f64,
     /// Lost when more than this share of the search lines leave the image.
@@ -75,9 +83,18 @@ pub struct TrackerConfig {
     pub max_predicted_step_px: f64,
     /// Rate at which a point's reference contrast follows what it sees (0..1).
     pub contrast_learning_rate: f64,
-    /// A candidate whose contrast is below this fraction of the point's reference contrast
-    /// is ignored (0 disables the test).
-    pub min_contrast_ratio: f64,
+    /// Appearance cue: each point learns the grey level just inside its edge (the tracked
+    /// surface, which moves with the contour). A candidate whose inside differs from it by
+    /// more than `appearance_tolerance` grey levels costs this many px per extra grey level
+    /// when the fit chooses among a point's candidates. It tells a face's own edge from the
+    /// silhouette of a neighbouring face appearing beside it. 0 disables.
+    pub appearance_px_per_grey: f64,
+    /// Grey-level difference the appearance cue tolerates for free.
+    pub appearance_tolerance: f64,
+    /// Rate at which a point's inside grey level follows what it sees (0..1), from edges
+    /// within the tolerance only: slow, so lighting can drift but a neighbouring face creeping
+    /// in beside the edge cannot.
+    pub appearance_learning_rate: f64,
 }
 
 impl Default for TrackerConfig {
@@ -88,14 +105,16 @@ impl Default for TrackerConfig {
             search_px: 10.0,
             passes: 2,
             refine_search_px: 4.0,
-            edge_sign: EdgeSign::Learned,
+            edge_sign: EdgeSign::Either,
             min_contrast: 12,
-            model: DeformationModel::NormalOnly,
+            model: DeformationModel::Projective,
             loss: RobustLoss::Tukey,
-            iterations: 8,
+            iterations: 4,
+            refine_iterations: 2,
             sigma_min_px: 0.4,
             sigma_max_px: 3.0,
             deformation_ridge: 1e-3,
+            perspective_ridge: 4.0,
             inlier_px: 2.0,
             max_outside_fraction: 0.5,
             min_edge_fraction: 0.3,
@@ -107,7 +126,9 @@ impl Default for TrackerConfig {
             deformation_velocity_gain: 0.3,
             max_predicted_step_px: 20.0,
             contrast_learning_rate: 0.2,
-            min_contrast_ratio: 0.0,
+            appearance_px_per_grey: 0.6,
+            appearance_tolerance: 10.0,
+            appearance_learning_rate: 0.05,
         }
     }
 }
@@ -138,11 +159,13 @@ impl TrackerConfig {
             self.refine_search_px,
             "1..=40 px",
         )?;
-        check((1..=510).contains(&self.min_contrast), "min_contrast", self.min_contrast as f64, "1..=510")?;
+        check((1..=255).contains(&self.min_contrast), "min_contrast", self.min_contrast as f64, "1..=255")?;
         check((1..=50).contains(&self.iterations), "iterations", self.iterations as f64, "1..=50")?;
+        check((1..=50).contains(&self.refine_iterations), "refine_iterations", self.refine_iterations as f64, "1..=50")?;
         check(self.sigma_min_px > 0.0 && self.sigma_min_px <= self.sigma_max_px, "sigma_min_px", self.sigma_min_px, "0 < x <= sigma_max_px")?;
         check(self.sigma_max_px.is_finite(), "sigma_max_px", self.sigma_max_px, "finite")?;
         check(self.deformation_ridge >= 0.0 && self.deformation_ridge.is_finite(), "deformation_ridge", self.deformation_ridge, ">= 0")?;
+        check(self.perspective_ridge >= 0.0 && self.perspective_ridge.is_finite(), "perspective_ridge", self.perspective_ridge, ">= 0")?;
         check(self.inlier_px > 0.0 && self.inlier_px.is_finite(), "inlier_px", self.inlier_px, "> 0 px")?;
         check(unit(self.max_outside_fraction), "max_outside_fraction", self.max_outside_fraction, "0..=1")?;
         check(unit(self.min_edge_fraction), "min_edge_fraction", self.min_edge_fraction, "0..=1")?;
@@ -154,7 +177,19 @@ impl TrackerConfig {
         check(unit(self.deformation_velocity_gain), "deformation_velocity_gain", self.deformation_velocity_gain, "0..=1")?;
         check(self.max_predicted_step_px >= 0.0, "max_predicted_step_px", self.max_predicted_step_px, ">= 0 px")?;
         check(unit(self.contrast_learning_rate), "contrast_learning_rate", self.contrast_learning_rate, "0..=1")?;
-        check(unit(self.min_contrast_ratio), "min_contrast_ratio", self.min_contrast_ratio, "0..=1")?;
+        check(
+            self.appearance_px_per_grey >= 0.0 && self.appearance_px_per_grey.is_finite(),
+            "appearance_px_per_grey",
+            self.appearance_px_per_grey,
+            ">= 0",
+        )?;
+        check(unit(self.appearance_learning_rate), "appearance_learning_rate", self.appearance_learning_rate, "0..=1")?;
+        check(
+            self.appearance_tolerance >= 0.0 && self.appearance_tolerance.is_finite(),
+            "appearance_tolerance",
+            self.appearance_tolerance,
+            ">= 0 grey levels",
+        )?;
         Ok(())
     }
 }

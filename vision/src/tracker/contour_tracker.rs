@@ -5,9 +5,9 @@ use nalgebra::{Matrix2, Vector2};
 use super::config::{ConfigError, EdgeSign, TrackerConfig};
 use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
-use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings};
-use super::frame::AffineFrame;
-use super::search::{search_point, PointEdges, SideGeometry};
+use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
+use super::frame::{AffineFrame, Placement};
+use super::search::{search_point, Candidate, PointEdges, SideGeometry};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -18,6 +18,23 @@ pub enum TrackerError {
     Config(#[from] ConfigError),
     #[error(transparent)]
     Template(#[from] TemplateError),
+}
+
+/// One point's search in the last pass.
+#[derive(Debug, Clone, Copy)]
+pub struct SearchLine<'a> {
+    /// Where the point was placed, image px.
+    pub point: Vector2<f64>,
+    /// Outward unit normal searched along.
+    pub normal: Vector2<f64>,
+    /// Edges found, strongest first (offsets along `normal`).
+    pub candidates: &'a [Candidate],
+    /// Index of the candidate the fit used.
+    pub chosen: Option<usize>,
+    /// Distance of the chosen candidate from the fitted contour, px.
+    pub residual_px: f64,
+    /// The search line left the image.
+    pub outside: bool,
 }
 
 /// An affine template active contour (Appendix A of the thesis, made robust).
@@ -42,7 +59,7 @@ pub enum TrackerError {
 pub struct ContourTracker {
     config: TrackerConfig,
     template: Template,
-    frame: AffineFrame,
+    placement: Placement,
     /// Basis at initialisation, inverted: `[e1 e2] · initial⁻¹` is the deformation so far.
     initial_basis_inv: Matrix2<f64>,
     initial_det: f64,
@@ -50,8 +67,9 @@ pub struct ContourTracker {
     state: TrackState,
     confidence: Confidence,
     updates: u64,
-    // Per-side search geometry of the current pass.
+    // Per-side search geometry of the current pass, and the same sides for the fit.
     sides: Vec<SideGeometry>,
+    fit_sides: Vec<FitSide>,
     // Per-point data of the current pass (structure of arrays, sized at construction).
     pos_x: Vec<f64>,
     pos_y: Vec<f64>,
@@ -62,6 +80,8 @@ pub struct ContourTracker {
     edges: Vec<PointEdges>,
     /// Learnt signed outward contrast per point (0 = not learnt yet).
     ref_contrast: Vec<f32>,
+    /// Learnt grey level just inside each point's edge (negative = not learnt yet).
+    ref_inside: Vec<f32>,
     fit: FitBuffers,
 }
 
@@ -97,13 +117,14 @@ impl ContourTracker {
             ),
             config,
             template,
-            frame,
+            placement: Placement::affine(frame),
             initial_basis_inv: Matrix2::identity(),
             initial_det: 1.0,
             state: TrackState::Tracking,
             confidence: Confidence::default(),
             updates: 0,
             sides: Vec::with_capacity(sides.max(8)),
+            fit_sides: Vec::with_capacity(sides.max(8)),
             pos_x: Vec::with_capacity(n),
             pos_y: Vec::with_capacity(n),
             rel_x: Vec::with_capacity(n),
@@ -112,6 +133,7 @@ impl ContourTracker {
             nrm_y: Vec::with_capacity(n),
             edges: Vec::with_capacity(n),
             ref_contrast: Vec::with_capacity(n),
+            ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
         };
         tracker.restart(frame);
@@ -121,7 +143,7 @@ impl ContourTracker {
     /// Resets state, learning and velocity and places the template at `frame`.
     fn restart(&mut self, frame: AffineFrame) {
         let n = self.template.points().len();
-        self.frame = frame;
+        self.placement = Placement::affine(frame);
         self.initial_basis_inv = frame.basis().try_inverse().unwrap_or_else(Matrix2::identity);
         self.initial_det = frame.det();
         self.filter.reset();
@@ -136,6 +158,8 @@ impl ContourTracker {
         self.edges.resize(n, PointEdges::default());
         self.ref_contrast.clear();
         self.ref_contrast.resize(n, 0.0);
+        self.ref_inside.clear();
+        self.ref_inside.resize(n, -1.0);
         self.fit.resize(n);
     }
 
@@ -164,32 +188,32 @@ impl ContourTracker {
             return self.state;
         }
         let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
-        let predicted = self.filter.predict(&self.frame, dt_s);
+        let predicted = self.filter.predict(&self.placement, dt_s);
         let mut current = predicted;
-        let mut sigma_px = self.config.sigma_max_px;
         for pass in 0..self.config.passes {
             let search_px = if pass == 0 { self.config.search_px } else { self.config.refine_search_px };
             self.search(image, &current, search_px);
             let settings = FitSettings {
                 model: self.config.model,
                 loss: self.config.loss,
-                iterations: self.config.iterations,
+                iterations: if pass == 0 { self.config.iterations } else { self.config.refine_iterations },
                 sigma_min_px: self.config.sigma_min_px,
                 sigma_max_px: self.config.sigma_max_px.min(search_px),
                 deformation_ridge: self.config.deformation_ridge,
+                perspective_ridge: self.config.perspective_ridge,
+
             };
-            let points = FitPoints {
-                px: &self.rel_x,
-                py: &self.rel_y,
-                nx: &self.nrm_x,
-                ny: &self.nrm_y,
-                edges: &self.edges,
-            };
+            let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides, edges: &self.edges };
             let fit = fit_motion(&points, &settings, &mut self.fit);
-            sigma_px = fit.sigma_px;
-            current = current.moved(fit.t, fit.a, current.origin);
+            match current.moved(fit.t, fit.a, fit.g, current.frame.origin) {
+                Some(moved) => current = moved,
+                None => {
+                    self.state = TrackState::Lost(LostReason::NotFinite);
+                    self.updates += 1;
+                    return self.state;
+                }
+            }
         }
-        let _ = sigma_px;
         let verdict = self.judge(&current);
         self.state = match verdict {
             Some(reason) => TrackState::Lost(reason),
@@ -197,7 +221,7 @@ impl ContourTracker {
                 if self.updates > 0 {
                     self.filter.correct(&predicted, &current, dt_s);
                 }
-                self.frame = current;
+                self.placement = current;
                 self.learn();
                 TrackState::Tracking
             }
@@ -206,27 +230,48 @@ impl ContourTracker {
         self.state
     }
 
-    /// Places the points for `frame` and searches every normal.
-    fn search(&mut self, image: &ImageView<'_>, frame: &AffineFrame, search_px: f64) {
+    /// Places the points for `placement` and searches every normal.
+    fn search(&mut self, image: &ImageView<'_>, placement: &Placement, search_px: f64) {
+        let frame = &placement.frame;
         let orient = self.template.orientation * frame.det().signum();
         self.sides.clear();
+        self.fit_sides.clear();
         let fixed_sign = match self.config.edge_sign {
             EdgeSign::Either => Some(0),
             EdgeSign::Fixed(p) => Some(p.outward_sign()),
             EdgeSign::Learned => None,
         };
         for edge in &self.template.edges {
-            let tau = frame.e1 * edge.tangent.x + frame.e2 * edge.tangent.y;
+            // A side stays straight under the placement; its image direction is that of its
+            // end points (the tangent pushed through the map's derivative in the affine case).
+            let tau = if placement.perspective == Vector2::zeros() {
+                frame.e1 * edge.tangent.x + frame.e2 * edge.tangent.y
+            } else {
+                placement.image_from_template(edge.start + edge.tangent)
+                    - placement.image_from_template(edge.start)
+            };
             let len = tau.norm();
             // Outward normal: right of the tangent for a positively oriented polygon.
             let normal = if len > 0.0 { [orient * tau.y / len, -orient * tau.x / len] } else { [1.0, 0.0] };
             let side = SideGeometry::new(normal, search_px);
             self.sides.push(side);
+            let start = placement.image_from_template(edge.start) - frame.origin;
+            self.fit_sides.push(FitSide {
+                first: edge.first,
+                count: edge.count,
+                normal: Vector2::new(normal[0], normal[1]),
+                np: normal[0] * start.x + normal[1] * start.y,
+            });
+            let affine = placement.perspective == Vector2::zeros();
             let first = frame.image_from_template(edge.start);
             let step = frame.e1 * edge.step.x + frame.e2 * edge.step.y;
             for k in 0..edge.count {
                 let i = edge.first + k;
-                let p = first + step * k as f64;
+                let p = if affine {
+                    first + step * k as f64
+                } else {
+                    placement.image_from_template(edge.start + edge.step * k as f64)
+                };
                 self.pos_x[i] = p.x;
                 self.pos_y[i] = p.y;
                 self.rel_x[i] = p.x - frame.origin.x;
@@ -241,24 +286,22 @@ impl ContourTracker {
                     }
                 };
                 search_point(image, &side, p.x, p.y, search_px, sign, self.config.min_contrast, &mut self.edges[i]);
-                if self.config.min_contrast_ratio > 0.0 {
-                    let floor = self.ref_contrast[i].abs() * self.config.min_contrast_ratio as f32;
+                let reference = self.ref_inside[i];
+                if self.config.appearance_px_per_grey > 0.0 && reference >= 0.0 {
+                    let gain = self.config.appearance_px_per_grey as f32;
+                    let tolerance = self.config.appearance_tolerance as f32;
                     let e = &mut self.edges[i];
-                    let mut kept = 0;
-                    for c in 0..e.count as usize {
-                        if e.candidates[c].contrast.abs() >= floor {
-                            e.candidates[kept] = e.candidates[c];
-                            kept += 1;
-                        }
+                    for c in &mut e.candidates[..e.count as usize] {
+                        c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
                     }
-                    e.count = kept as u8;
                 }
             }
         }
     }
 
-    /// Quality and geometry checks of the fitted frame; `Some(reason)` means lost.
-    fn judge(&mut self, frame: &AffineFrame) -> Option<LostReason> {
+    /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.
+    fn judge(&mut self, placement: &Placement) -> Option<LostReason> {
+        let frame = &placement.frame;
         let n = self.template.points().len();
         let (mut outside, mut with_edge, mut inliers, mut sq) = (0usize, 0usize, 0usize, 0.0);
         for i in 0..n {
@@ -285,7 +328,7 @@ impl ContourTracker {
             score: inlier_fraction * (-(residual_px / self.config.inlier_px).powi(2)).exp(),
         };
         let c = &self.confidence;
-        if !frame.is_finite() {
+        if !frame.is_finite() || !placement.perspective.iter().all(|v| v.is_finite()) {
             return Some(LostReason::NotFinite);
         }
         if c.outside_fraction > self.config.max_outside_fraction {
@@ -317,6 +360,15 @@ impl ContourTracker {
         {
             return Some(LostReason::DegenerateBasis { squash, area_ratio });
         }
+        // Perspective must not bend the template through the horizon: across the polygon the
+        // scale `1 / (1 + w·q)` stays within a factor of 3 of the origin's.
+        let horizon_ok = self.template.corners().iter().all(|c| {
+            let d = placement.denominator(*c);
+            d > 1.0 / 3.0 && d < 3.0
+        });
+        if !horizon_ok {
+            return Some(LostReason::DegenerateBasis { squash, area_ratio });
+        }
         None
     }
 
@@ -324,12 +376,22 @@ impl ContourTracker {
     /// [`EdgeSign::Learned`] its sign is the point's polarity from then on.
     fn learn(&mut self) {
         let rate = if self.updates == 0 { 1.0 } else { self.config.contrast_learning_rate as f32 };
+        let appearance_rate = self.config.appearance_learning_rate as f32;
         for i in 0..self.template.points().len() {
             let k = self.fit.chosen[i];
             if k < 0 || self.fit.residual[i].abs() > self.config.inlier_px {
                 continue;
             }
-            let c = self.edges[i].candidates[k as usize].contrast;
+            let cand = self.edges[i].candidates[k as usize];
+            let inside = &mut self.ref_inside[i];
+            if *inside < 0.0 {
+                *inside = cand.inside as f32;
+            } else if cand.penalty_px <= 0.0 {
+                // Only an edge that already looks right teaches: an appearance that creeps away
+                // (a neighbouring face widening beside the edge) must not drag the reference.
+                *inside += appearance_rate * (cand.inside as f32 - *inside);
+            }
+            let c = cand.contrast;
             let r = &mut self.ref_contrast[i];
             // A point that has learnt a sign keeps it: only same-sign edges update it.
             if *r == 0.0 || r.signum() == c.signum() || self.config.edge_sign != EdgeSign::Learned {
@@ -353,9 +415,15 @@ impl ContourTracker {
         self.updates
     }
 
-    /// The current affine frame (the last good one once lost).
+    /// The current affine frame (the last good one once lost). With the projective model it
+    /// is the contour's local affine frame at the template origin.
     pub fn frame(&self) -> AffineFrame {
-        self.frame
+        self.placement.frame
+    }
+
+    /// The full placement: affine frame plus perspective term.
+    pub fn placement(&self) -> Placement {
+        self.placement
     }
 
     /// The template (corners and points in affine coordinates).
@@ -370,17 +438,17 @@ impl ContourTracker {
 
     /// Current corners in image pixels, in the order given at initialisation.
     pub fn corners(&self) -> impl ExactSizeIterator<Item = Vector2<f64>> + '_ {
-        self.template.corners().iter().map(|c| self.frame.image_from_template(*c))
+        self.template.corners().iter().map(|c| self.placement.image_from_template(*c))
     }
 
     /// Image position of template coordinates `(s, t)`.
     pub fn image_from_template(&self, st: Vector2<f64>) -> Vector2<f64> {
-        self.frame.image_from_template(st)
+        self.placement.image_from_template(st)
     }
 
     /// Template coordinates of an image point (`None` if the frame were singular).
     pub fn template_from_image(&self, x: Vector2<f64>) -> Option<Vector2<f64>> {
-        self.frame.template_from_image(x)
+        self.placement.template_from_image(x)
     }
 
     /// Estimated velocity of the origin, px/s.
@@ -391,6 +459,18 @@ impl ContourTracker {
     /// The sampling points of the last search pass, image px (for overlays and debugging).
     pub fn sample_points(&self) -> impl ExactSizeIterator<Item = Vector2<f64>> + '_ {
         self.pos_x.iter().zip(&self.pos_y).map(|(x, y)| Vector2::new(*x, *y))
+    }
+
+    /// What each point's search found in the last pass (for overlays and diagnosis).
+    pub fn search_lines(&self) -> impl ExactSizeIterator<Item = SearchLine<'_>> + '_ {
+        (0..self.pos_x.len()).map(move |i| SearchLine {
+            point: Vector2::new(self.pos_x[i], self.pos_y[i]),
+            normal: Vector2::new(self.nrm_x[i], self.nrm_y[i]),
+            candidates: self.edges[i].as_slice(),
+            chosen: usize::try_from(self.fit.chosen[i]).ok(),
+            residual_px: self.fit.residual[i],
+            outside: self.edges[i].outside,
+        })
     }
 
     /// Per point of the last pass: the accepted edge's image position, if it was an inlier.

@@ -38,9 +38,9 @@ pub mod synth;
 
 pub use config::{ConfigError, EdgeSign, TrackerConfig};
 pub use contour::{Template, TemplateError, MIN_POINTS};
-pub use contour_tracker::{ContourTracker, TrackerError};
+pub use contour_tracker::{ContourTracker, SearchLine, TrackerError};
 pub use fit::{DeformationModel, RobustLoss};
-pub use frame::AffineFrame;
-pub use search::Polarity;
+pub use frame::{AffineFrame, Placement};
+pub use search::{Candidate, Polarity};
 pub use state::{Confidence, LostReason, TrackState};
 pub use stereo::{Role, StereoStates, StereoTrackerSet, View};

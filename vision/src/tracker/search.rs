@@ -16,8 +16,11 @@ use crate::image::ImageView;
 pub const MAX_CANDIDATES: usize = 4;
 /// Longest search half-length accepted, pixels along the normal.
 pub const MAX_SEARCH_PX: f64 = 40.0;
-/// Samples along the axis for the longest search: `40 · √2 + 2` each side plus two ends.
-const BUF: usize = 2 * 60 + 3;
+/// Extra samples read beyond the search window at each end, for the gradient's neighbours
+/// and the intensities just inside and outside a peak.
+const PAD: usize = 4;
+/// Samples along the axis for the longest search: `40 · √2 + 2` each side plus padding.
+const BUF: usize = 2 * (58 + PAD) + 1;
 
 /// Which intensity change across the contour an edge must have.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -41,15 +44,6 @@ impl Polarity {
             Polarity::BrightInside => -1,
         }
     }
-
-    /// The polarity whose outward sign is `sign` (0 = either).
-    pub(crate) fn from_outward_sign(sign: i32) -> Self {
-        match sign.signum() {
-            1 => Polarity::DarkInside,
-            -1 => Polarity::BrightInside,
-            _ => Polarity::Either,
-        }
-    }
 }
 
 /// Search geometry shared by all points of one polygon side in one update.
@@ -61,6 +55,8 @@ pub(crate) struct SideGeometry {
     pub horizontal: bool,
     /// Normal component along the search axis (`n.x` or `n.y`), |.| >= 0.707.
     pub n_axis: f64,
+    /// `1 / n_axis`.
+    pub inv_n_axis: f64,
     /// Samples each side of the base pixel.
     pub half: usize,
 }
@@ -71,7 +67,7 @@ impl SideGeometry {
         let n_axis = if horizontal { normal[0] } else { normal[1] };
         // Rounding the base pixel moves the search line up to 0.71 px along the normal.
         let half = ((search_px + 0.71) / n_axis.abs()).ceil() as usize;
-        Self { normal, horizontal, n_axis, half: half.min((BUF - 3) / 2) }
+        Self { normal, horizontal, n_axis, inv_n_axis: 1.0 / n_axis, half: half.min((BUF - 1) / 2 - PAD) }
     }
 }
 
@@ -81,8 +77,15 @@ pub struct Candidate {
     /// Offset along the outward normal from the predicted point, pixels.
     pub h_px: f32,
     /// Gradient along the outward normal at the peak, signed (central difference, grey levels
-    /// per two samples: -510..510). Positive: brighter outside.
+    /// per two samples: -255..255). Positive: brighter outside.
     pub contrast: f32,
+    /// Mean grey level 2-3 samples inside the peak (towards the contour's interior).
+    pub inside: u8,
+    /// Mean grey level 2-3 samples outside the peak.
+    pub outside: u8,
+    /// Extra cost (px) the fit adds to this candidate's distance when choosing among a
+    /// point's candidates (set by the tracker from its appearance; 0 from the search).
+    pub penalty_px: f32,
 }
 
 /// What a search line found.
@@ -101,6 +104,24 @@ impl PointEdges {
     }
 }
 
+/// `floor` as an integer without a libm call (the baseline x86-64 target has no SSE4.1
+/// rounding instruction) and without the saturating conversion's checks. Callers pass
+/// finite values of magnitude below 2^31 (checked once per point).
+#[inline(always)]
+fn floor_to_isize(x: f64) -> isize {
+    debug_assert!(x.is_finite() && x.abs() < 2147483648.0);
+    // SAFETY: `x` is finite and within isize's range (see above), which is all
+    // `to_int_unchecked` requires.
+    let t = unsafe { x.to_int_unchecked::<i32>() } as isize;
+    t - ((x < t as f64) as isize)
+}
+
+/// `ceil` as an integer, likewise.
+#[inline(always)]
+fn ceil_to_isize(x: f64) -> isize {
+    -floor_to_isize(-x)
+}
+
 /// Searches one point's normal for up to [`MAX_CANDIDATES`] gradient maxima of at least
 /// `min_contrast` with the wanted outward sign (`0` = either), keeping the strongest, and
 /// writes them into `out`. `(x, y)` is the predicted point in pixels.
@@ -117,89 +138,125 @@ pub(crate) fn search_point(
 ) {
     out.count = 0;
     out.outside = false;
-    let (w, h, stride) = (image.width() as isize, image.height() as isize, image.stride());
-    let bx = x.round();
-    let by = y.round();
-    if !(bx.is_finite() && by.is_finite()) {
+    if !(x.is_finite() && y.is_finite()) || x.abs() > 1e8 || y.abs() > 1e8 {
         out.outside = true;
         return;
     }
-    let (bxi, byi) = (bx as isize, by as isize);
-    let half = side.half as isize;
-    let reach = half + 1;
-    let len = 2 * side.half + 3;
-    let mut buf = [0i16; BUF];
+    let (w, h, stride) = (image.width() as isize, image.height() as isize, image.stride());
+    let (bxi, byi) = (floor_to_isize(x + 0.5), floor_to_isize(y + 0.5));
+    let reach = (side.half + 1 + PAD) as isize;
+    let len = 2 * reach as usize + 1;
+    // The samples along the axis, one byte each: the row itself, or the column gathered with
+    // the stride into a small buffer. Bounds are checked once here, not per sample.
+    let mut column = [0u8; BUF];
     let data = image.data();
-    if side.horizontal {
+    let samples: &[u8] = if side.horizontal {
         if byi < 0 || byi >= h || bxi - reach < 0 || bxi + reach >= w {
             out.outside = true;
             return;
         }
         let start = byi as usize * stride + (bxi - reach) as usize;
-        for (b, &p) in buf[..len].iter_mut().zip(&data[start..start + len]) {
-            *b = p as i16;
-        }
+        &data[start..start + len]
     } else {
         if bxi < 0 || bxi >= w || byi - reach < 0 || byi + reach >= h {
             out.outside = true;
             return;
         }
         let start = (byi - reach) as usize * stride + bxi as usize;
-        let column = data[start..start + (len - 1) * stride + 1].iter().step_by(stride);
-        for (b, &p) in buf[..len].iter_mut().zip(column) {
-            *b = p as i16;
+        let last = start + (len - 1) * stride;
+        // The column's last sample is inside the image (checked above), so is every one.
+        let column_data = &data[start..=last];
+        for (j, b) in column[..len].iter_mut().enumerate() {
+            // SAFETY: j * stride <= (len - 1) * stride = last - start < column_data.len().
+            *b = unsafe { *column_data.get_unchecked(j * stride) };
+        }
+        &column[..len]
+    };
+
+    // The score the wanted polarity maximises at every sample: the derivative along the axis
+    // (central difference), times the sign that turns it into the outward derivative and
+    // selects the polarity, or its magnitude for either polarity. One straight loop per case,
+    // which the compiler vectorises; score[k] belongs to sample k + 1.
+    let axis_sign: i16 = if side.n_axis >= 0.0 { 1 } else { -1 };
+    let mut score = [0i16; BUF];
+    let inner = len - 2;
+    let (before, after) = (&samples[..inner], &samples[2..len]);
+    if outward_sign == 0 {
+        for ((sc, &b), &a) in score[..inner].iter_mut().zip(before).zip(after) {
+            *sc = (a as i16 - b as i16).abs();
+        }
+    } else {
+        let sigma = axis_sign * outward_sign.signum() as i16;
+        for ((sc, &b), &a) in score[..inner].iter_mut().zip(before).zip(after) {
+            *sc = sigma * (a as i16 - b as i16);
         }
     }
-
-    // Derivative along the outward normal (sign of the axis step folded in), then the score
-    // that the wanted polarity maximises.
-    let axis_sign: i32 = if side.n_axis >= 0.0 { 1 } else { -1 };
-    let mut score = [0i32; BUF];
-    let mut grad = [0i32; BUF];
-    for k in 1..len - 1 {
-        let g = axis_sign * (buf[k + 1] as i32 - buf[k - 1] as i32);
-        grad[k] = g;
-        score[k] = match outward_sign {
-            0 => g.abs(),
-            s => s * g,
-        };
+    // Normal offset of the base pixel relative to the predicted point, and per axis step; the
+    // samples whose offset lies within ±search_px.
+    let h0 = side.normal[0] * (bxi as f64 - x) + side.normal[1] * (byi as f64 - y);
+    let step_h = side.n_axis;
+    let (k_a, k_b) = ((-search_px - h0) * side.inv_n_axis, (search_px - h0) * side.inv_n_axis);
+    let k_lo = (ceil_to_isize(k_a.min(k_b)) + reach).max(PAD as isize) as usize;
+    let k_hi = (floor_to_isize(k_a.max(k_b)) + reach).min((len - PAD - 1) as isize) as usize;
+    if k_lo > k_hi {
+        return;
     }
-
-    // Normal offset of the base pixel relative to the predicted point.
-    let h0 = side.normal[0] * (bx - x) + side.normal[1] * (by - y);
-    let step_h = side.n_axis; // normal offset per axis step
+    // Peaks: local maxima of the score above the threshold, flagged branch-free over three
+    // shifted views of the scores (vectorised), then visited eight flags at a time.
+    let threshold = min_contrast.clamp(1, i16::MAX as i32) as i16;
+    let mut flags = [0u8; BUF + 8];
+    let n = k_hi + 1 - k_lo;
+    let (prev, here, next) = (&score[k_lo - 2..k_hi - 1], &score[k_lo - 1..k_hi], &score[k_lo..=k_hi]);
+    for (((f, &p), &s), &q) in flags[..n].iter_mut().zip(prev).zip(here).zip(next) {
+        *f = ((s >= threshold) & (s > p) & (s >= q)) as u8;
+    }
+    // Keep the strongest few by score (integer work only)...
+    let mut peaks = [(0i16, 0usize); MAX_CANDIDATES];
     let mut count = 0usize;
-    for k in 2..len - 2 {
-        let s = score[k];
-        if s < min_contrast || s <= score[k - 1] || s < score[k + 1] {
-            continue;
-        }
-        // Parabola through the peak and its neighbours.
-        let (a, c) = (score[k - 1] as f64, score[k + 1] as f64);
-        let denom = a - 2.0 * s as f64 + c;
-        let delta = if denom < 0.0 { (0.5 * (a - c) / denom).clamp(-0.5, 0.5) } else { 0.0 };
-        let d = (k as isize - reach) as f64 + delta;
-        let h_px = h0 + d * step_h;
-        if h_px.abs() > search_px {
-            continue;
-        }
-        let peak = s as f64 - 0.25 * (a - c) * delta;
-        let sign = if grad[k] >= 0 { 1.0 } else { -1.0 };
-        let cand = Candidate { h_px: h_px as f32, contrast: (sign * peak) as f32 };
-        // Keep the strongest MAX_CANDIDATES (insertion into a tiny sorted array).
-        let mut pos = count;
-        while pos > 0 && out.candidates[pos - 1].contrast.abs() < cand.contrast.abs() {
-            if pos < MAX_CANDIDATES {
-                out.candidates[pos] = out.candidates[pos - 1];
+    for (chunk_index, chunk) in flags[..n.div_ceil(8) * 8].chunks_exact(8).enumerate() {
+        let mut bits = u64::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3], chunk[4], chunk[5], chunk[6], chunk[7]]);
+        while bits != 0 {
+            let offset = chunk_index * 8 + bits.trailing_zeros() as usize / 8;
+            bits &= bits - 1;
+            let k = k_lo + offset;
+            let s = score[k - 1];
+            let mut pos = count;
+            while pos > 0 && peaks[pos - 1].0 < s {
+                if pos < MAX_CANDIDATES {
+                    peaks[pos] = peaks[pos - 1];
+                }
+                pos -= 1;
             }
-            pos -= 1;
-        }
-        if pos < MAX_CANDIDATES {
-            out.candidates[pos] = cand;
-            count = (count + 1).min(MAX_CANDIDATES);
+            if pos < MAX_CANDIDATES {
+                peaks[pos] = (s, k);
+                count = (count + 1).min(MAX_CANDIDATES);
+            }
         }
     }
-    out.count = count as u8;
+    // ...and do the sub-pixel and appearance work for those alone.
+    let inward = -(axis_sign as isize);
+    let mut kept = 0usize;
+    let (h0, step_h, limit) = (h0 as f32, step_h as f32, search_px as f32);
+    for &(s, k) in &peaks[..count] {
+        // Parabola through the peak and its neighbours (score index k - 1 is sample k). At a
+        // strict local maximum the denominator is negative and the vertex within ±½.
+        let (a, b, c) = (score[k - 2] as f32, s as f32, score[k] as f32);
+        let denom = a - 2.0 * b + c;
+        let delta = if denom < 0.0 { (0.5 * (a - c) / denom).clamp(-0.5, 0.5) } else { 0.0 };
+        let h_px = h0 + ((k as isize - reach) as f32 + delta) * step_h;
+        if h_px.abs() > limit {
+            continue; // the interpolated peak slipped just past the window's end
+        }
+        let peak = b - 0.25 * (a - c) * delta;
+        let outward_derivative = axis_sign * (samples[k + 1] as i16 - samples[k - 1] as i16);
+        let sign = if outward_derivative >= 0 { 1.0 } else { -1.0 };
+        let at = |offset: isize| samples[(k as isize + offset) as usize] as u32;
+        let inside = ((at(2 * inward) + at(3 * inward) + 1) / 2) as u8;
+        let outside = ((at(-2 * inward) + at(-3 * inward) + 1) / 2) as u8;
+        out.candidates[kept] = Candidate { h_px, contrast: sign * peak, inside, outside, penalty_px: 0.0 };
+        kept += 1;
+    }
+    out.count = kept as u8;
 }
 
 #[cfg(test)]
@@ -244,6 +301,8 @@ mod tests {
                 let got = out.candidates[0];
                 assert!((got.h_px as f64 - true_h).abs() < 0.1, "angle {deg}: want {true_h}, got {}", got.h_px);
                 assert!(got.contrast > 0.0);
+                // Dark (40) inside, bright (200) outside.
+                assert!(got.inside < 70 && got.outside > 170, "{got:?}");
                 // The opposite polarity sees nothing.
                 search_point(&img.view(), &side, centre[0], centre[1], 10.0, -1, 10, &mut out);
                 assert_eq!(out.count, 0);
