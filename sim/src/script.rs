@@ -66,13 +66,15 @@ impl GroundTruthPick {
         // them along the block's y; +90° along its x.
         let across_x = matches!(b.shape.kind, BlockKind::Cube | BlockKind::Bar) && size.x < size.y;
         let mut yaw = block_yaw + if across_x { std::f64::consts::FRAC_PI_2 } else { 0.0 };
-        // The jaws are symmetric: pick the equivalent yaw nearest 0 (plate facing the cameras).
-        yaw = wrap_angle(yaw);
+        // The jaws are symmetric: pick the equivalent yaw nearest -90° (the plate, on the
+        // palm's side along the closing axis, faces +x, the cameras of the shipped scenarios).
+        yaw = wrap_angle(yaw + std::f64::consts::FRAC_PI_2);
         if yaw > std::f64::consts::FRAC_PI_2 {
             yaw -= std::f64::consts::PI;
         } else if yaw < -std::f64::consts::FRAC_PI_2 {
             yaw += std::f64::consts::PI;
         }
+        yaw -= std::f64::consts::FRAC_PI_2;
         Self {
             block,
             phase: Phase::Approach,
