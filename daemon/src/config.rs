@@ -229,8 +229,12 @@ pub struct ServoSettings {
     pub settle_frames: u32,
     /// Tool speed of servo moves, m/s.
     pub speed_mps: f64,
-    /// Height of the tool point above the facet's lowest corner at the grasp, m.
+    /// Height of the tool point above the table (`grasp.table_z_m`) at the grasp, m.
     pub grasp_height_m: f64,
+    /// Half-size of the local cage visited around the coarse approach pose, m: a local
+    /// affine model there takes out the perspective error of the global one (the global
+    /// model's image scale is that of the cage, ~10 % off near the target). 0 = skip.
+    pub local_cage_m: f64,
     /// The servo's goal is this far above the grasp pose (the open-loop approach comes down
     /// by it), m.
     pub standoff_above_m: f64,
@@ -255,6 +259,7 @@ impl Default for ServoSettings {
             settle_frames: 2,
             speed_mps: 0.08,
             grasp_height_m: 0.010,
+            local_cage_m: 0.0,
             standoff_above_m: 0.06,
             timeout_s: 90.0,
         }
@@ -265,6 +270,9 @@ impl Default for ServoSettings {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GraspConfig {
+    /// Height of the table top in robot coordinates, m (measured like the cage): the grasp
+    /// comes down to `servo.grasp_height_m` above it by the robot's own kinematics.
+    pub table_z_m: f64,
     pub approach_speed_mps: f64,
     /// Time the jaws get to close and settle, s.
     pub close_s: f64,
@@ -277,7 +285,7 @@ pub struct GraspConfig {
 
 impl Default for GraspConfig {
     fn default() -> Self {
-        Self { approach_speed_mps: 0.04, close_s: 0.8, lift_m: 0.07, lift_speed_mps: 0.05, min_grip_width_m: 0.005, timeout_s: 20.0 }
+        Self { table_z_m: 0.0, approach_speed_mps: 0.04, close_s: 0.8, lift_m: 0.07, lift_speed_mps: 0.05, min_grip_width_m: 0.005, timeout_s: 20.0 }
     }
 }
 

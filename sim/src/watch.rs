@@ -1,14 +1,19 @@
 //! Watching the daemon from ground truth: the simulator reads the daemon's telemetry (never
 //! the other way round) and judges what it claims. When the daemon's telemetry first reports
-//! that the servo converged (phase `grasp` after `servo`), it measures how well the gripper
-//! is placed for the grasp of the hinted facet:
+//! that the servo converged (phase `grasp` after `servo`), it measures the coplanarity the
+//! servo achieved with the hinted facet (the thesis's servo makes a surface of the gripper
+//! coplanar with the target facet; the grasp then follows open-loop):
 //!
-//! - `final_plane_error_mm`: distance of the **jaw-centre plane** (through the tool point,
-//!   midway between the finger tips, normal to the finger closing axis) from the plane the
-//!   grasp needs it in: the target block's mid-plane parallel to the facet, halfway between
-//!   the facet and the face opposite it (measured along the facet normal).
-//! - `final_angle_error_deg`: angle between the gripper plate's normal (the closing axis)
-//!   and the target facet's normal.
+//! - `final_plane_error_mm`: distance of the gripper plate's centre from the target facet's
+//!   plane (the plate is the surface made coplanar; 0 is perfect);
+//! - `final_angle_error_deg`: angle between the gripper plate's normal (the jaws' closing
+//!   axis) and the target facet's normal.
+//!
+//! When the jaws have closed (phase `lift` after `grasp`) it measures the grasp itself:
+//! `grasp_plane_error_mm`, the distance of the **jaw-centre plane** (through the tool point,
+//! normal to the closing axis) from the block's mid-plane parallel to the facet (halfway
+//! between the facet and the face opposite it), and the tool point's lateral offset from
+//! the facet's centre.
 //!
 //! It also records when each phase first appeared, when the daemon stopped or failed (and
 //! why), the first `Stop` command, and, when the scenario has an occluder, the first frame on
@@ -28,8 +33,10 @@ pub struct ConvergedPlacement {
     pub frame: u64,
     pub final_plane_error_mm: f64,
     pub final_angle_error_deg: f64,
+    /// Signed distance of the plate centre from the facet plane along its normal, mm.
+    pub plate_offset_mm: f64,
     /// Signed distance of the tool point from the block's mid-plane along the facet normal, mm.
-    pub plane_offset_mm: f64,
+    pub jaw_plane_offset_mm: f64,
     /// Tool point's horizontal offset within the facet plane from the facet's centre, mm.
     pub lateral_error_mm: f64,
     /// Tool point height above the table, mm.
@@ -42,6 +49,8 @@ pub struct DaemonWatch {
     /// First frame on which each phase was reported, by name, in order of appearance.
     pub phases: Vec<(String, u64)>,
     pub converged: Option<ConvergedPlacement>,
+    /// The placement when the jaws had closed (phase `lift` first reported).
+    pub grasped: Option<ConvergedPlacement>,
     /// First frame with phase `stopped` or `failed`, and the reason the daemon gave.
     pub stopped_frame: Option<u64>,
     pub stop_reason: Option<String>,
@@ -106,6 +115,9 @@ impl DaemonWatch {
             if phase == Phase::Grasp && self.last_phase == Some(Phase::Servo as u32) && self.converged.is_none() {
                 self.converged = self.placement(sim, frame);
             }
+            if phase == Phase::Lift && self.grasped.is_none() {
+                self.grasped = self.placement(sim, frame);
+            }
             if matches!(phase, Phase::Stopped | Phase::Failed) && self.stopped_frame.is_none() {
                 self.stopped_frame = Some(frame);
                 self.stop_reason = Some(t.reason_text());
@@ -126,13 +138,17 @@ impl DaemonWatch {
         let reading = sim.arm_reading();
         let tool = reading.tool_m;
         let plate_normal = (reading.palm_rot * crate::scene::PLATE_NORMAL_IN_PALM).normalize();
+        let (palm_pos, palm_rot) = sim.world.body_pose(sim.world.arm.links[4]);
+        let plate_centre = crate::scene::plate_corners_in_palm().iter().map(|&c| palm_pos + palm_rot * c).sum::<DVec3>() / 4.0;
+        let plate_offset = n.dot(plate_centre - centre);
         let offset = n.dot(tool - mid);
         let horizontal = n.cross(DVec3::Z).normalize_or_zero();
         Some(ConvergedPlacement {
             frame,
-            final_plane_error_mm: offset.abs() * 1e3,
+            final_plane_error_mm: plate_offset.abs() * 1e3,
             final_angle_error_deg: plate_normal.dot(n).abs().clamp(0.0, 1.0).acos().to_degrees(),
-            plane_offset_mm: offset * 1e3,
+            plate_offset_mm: plate_offset * 1e3,
+            jaw_plane_offset_mm: offset * 1e3,
             lateral_error_mm: horizontal.dot(tool - centre) * 1e3,
             tool_z_mm: tool.z * 1e3,
         })

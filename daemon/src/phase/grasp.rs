@@ -10,7 +10,10 @@ use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, Ste
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum GraspStage {
-    Approach { wait: Option<MoveWait> },
+    /// Along the facet normal, above the block.
+    Forward { wait: Option<MoveWait> },
+    /// Straight down to the grasp height.
+    Down { wait: Option<MoveWait> },
     Close { since: Option<u64> },
 }
 
@@ -22,15 +25,16 @@ pub struct Grasp {
 
 impl Grasp {
     pub fn new(frame_index: u64, approach_m: [f64; 3]) -> Self {
-        Self { start_frame: frame_index, stage: GraspStage::Approach { wait: None }, approach_m }
+        Self { start_frame: frame_index, stage: GraspStage::Forward { wait: None }, approach_m }
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
             return Step::Fail(format!("grasp: timed out after {} s in {:?}", m.cfg.grasp.timeout_s, self.stage));
         }
+        let speed = m.cfg.grasp.approach_speed_mps;
         match &mut self.stage {
-            GraspStage::Approach { wait } => {
+            GraspStage::Forward { wait } => {
                 let Some(w) = wait else {
                     // The fingers now pass in front of the facet: the trackers are done.
                     for role in [Role::Gripper, Role::Target] {
@@ -39,12 +43,27 @@ impl Grasp {
                         }
                     }
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
-                    m.set_status("grasp: approaching");
-                    return Step::Stay(Cmd::move_by(self.approach_m, 0.0, m.cfg.grasp.approach_speed_mps));
+                    m.set_status("grasp: jaws over the target");
+                    return Step::Stay(Cmd::move_by(self.approach_m, 0.0, speed));
                 };
-                match w.poll(c, 2) {
+                match w.poll(c, 1) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
                     MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the approach: {}", reject_text(code))),
+                    MovePoll::Done => {
+                        self.stage = GraspStage::Down { wait: Some(MoveWait::new(c.seq, c.frame_index)) };
+                        m.set_status("grasp: descending");
+                        // Down to the grasp height above the table by the robot's own
+                        // kinematics (exact, unlike an image-derived height).
+                        let dz = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m - f64::from(c.robot.tool_pos_m[2]);
+                        Step::Stay(Cmd::move_by([0.0, 0.0, dz], 0.0, speed))
+                    }
+                }
+            }
+            GraspStage::Down { wait } => {
+                let Some(w) = wait else { return Step::Fail("grasp: lost track of the descent".into()) };
+                match w.poll(c, 2) {
+                    MovePoll::Pending => Step::Stay(Cmd::HOLD),
+                    MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the descent: {}", reject_text(code))),
                     MovePoll::Done => {
                         self.stage = GraspStage::Close { since: None };
                         m.set_status("grasp: closing");

@@ -5,38 +5,65 @@
 //! has arrived, the phase hands over to the grasp (telemetry then says `grasp`: that moment
 //! is when the simulator judges the placement).
 //!
-//! **Goal.** The grasp closes the jaws across the facet and the face behind it, so the plate
-//! (normal = closing axis) must end up parallel to the facet, `depth/2` of the plate-to-jaw
-//! offset in front of it, with the tool point above the facet's centre line and
-//! `grasp_height_m + standoff_above_m` above the facet's lowest corner. That pose is turned
-//! into image terms relative to the target: `(s*, t*) = (0, 0)` (the facet centre) and zero
-//! parallax, shifted by [`ServoGoal::offset_by`] by the metric offset of the plate's
-//! reference point from the facet centre, with the facet normal and heights from the affine
-//! reconstruction. The goal angle is that of the plate's horizontal axis within the facet.
+//! **Goal** (thesis §6.3.4). The plate (normal = the jaws' closing axis) is made *coplanar*
+//! with the facet: zero parallax for all three marks, which no error of the model's scale
+//! can shift. Within the plane, the reference point goes straight above the facet's centre,
+//! high enough that the tool point is `grasp_height_m + standoff_above_m` above the table:
+//! the jaws, `tool_from_reference` behind the plate, then hang behind the facet plane and
+//! above the block. That in-plane offset becomes `(s*, t*)` by [`ServoGoal::offset_by`]; the
+//! goal angle is that of the plate's horizontal axis within the facet. The grasp then moves
+//! by metric offsets the robot's kinematics make exact: along the plate normal until the
+//! jaw centre is `depth/2` behind the facet, and down to the grasp height.
+//!
+//! **Coarse approach, local cage.** The servo starts from the goal pose as the global model
+//! reconstructs it (a `MoveTo`), then visits a small cage around it (±`local_cage_m`) and
+//! fits a local affine model: the global model's image scale is the cage's, while near the
+//! target it differs by ~10 % (perspective), and the metric stand-off offsets are converted
+//! with it. The servo and its goal use the local model.
 //!
 //! **Yaw centre.** The servo turns about the plate's reference point; the robot turns about
 //! the tool point. Each move is converted: `Δtool = Δref + (Rz(Δψ) − I)(tool − ref)`, with
 //! `tool − ref` from the gripper model at the current yaw.
 
-use handeye_vision::servo::{CoplanarityServo, GripperView, Motion, ServoConfig, ServoGoal, StepOutcome};
+use handeye_vision::affine::AffineStereo;
+use handeye_vision::servo::{CoplanarityServo, GripperView, Motion, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoPoint};
 use handeye_vision::tracker::{Role, View};
 use nalgebra::Vector3;
 
 use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, ServoTraceRow, Step};
 use crate::gripper::{gripper_view, stereo_frame};
 
+/// Offsets of the local cage points from the approach pose, in units of `local_cage_m`.
+const LOCAL_CAGE: [[f64; 3]; 7] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    /// The coarse approach `MoveTo` is to be sent.
+    Approach,
+    /// Visiting local cage point `i`; `n` samples taken there.
+    LocalCage { i: usize, n: u32 },
+    /// Look-and-move; `converging` once the final move was sent.
+    Servo { converging: bool },
+}
+
 pub struct ServoPhase {
     start_frame: u64,
-    /// The coarse approach (a `MoveTo` to the goal pose as the affine model reconstructs it)
-    /// is still to be sent / under way.
-    approach: Option<([f64; 3], f64)>,
-    approaching: bool,
-    servo: CoplanarityServo,
-    goal: ServoGoal,
+    stage: Stage,
     wait: Option<MoveWait>,
-    /// The final move after convergence is under way.
-    converging: bool,
-    /// The open-loop approach from the servo's goal to the grasp pose, robot frame, m.
+    servo: CoplanarityServo,
+    config: ServoConfig,
+    goal: ServoGoal,
+    /// Metric offset of the reference point's goal from the facet centre, robot frame.
+    offset_m: Vector3<f64>,
+    /// Horizontal axis of the plate at the goal (robot frame), for the goal angle.
+    plate_a: Vector3<f64>,
+    approach_pose: ([f64; 3], f64),
+    local_robot_m: Vec<Vector3<f64>>,
+    local_image_px: Vec<[f64; 4]>,
+    acc: [f64; 7],
+    /// The open-loop move from the servo's goal (plate coplanar with the facet) to above the
+    /// grasp: along the facet normal until the jaw centre is `depth/2` behind the facet, m.
+    /// The grasp then comes straight down.
     pub approach_m: [f64; 3],
 }
 
@@ -63,8 +90,18 @@ fn views(m: &Mission) -> Result<(handeye_vision::servo::StereoFrame, GripperView
     Ok((target, gripper))
 }
 
+/// The image goal for a metric `offset` of the reference point from the facet centre, and
+/// the plate's horizontal axis `a` lying along the facet.
+fn goal_for(model: &ServoModel, m_full: &nalgebra::Matrix4x3<f64>, m: &Mission, offset: &Vector3<f64>, a: &Vector3<f64>) -> Result<ServoGoal, String> {
+    let (target, gripper) = views(m)?;
+    let ma = m_full * a;
+    let axis_view = GripperView { axis: StereoPoint { left: [ma[0], ma[1]], right: [ma[2], ma[3]] }, ..gripper };
+    let angle_rad = ServoGoal::teach(model, &target, &axis_view).map_err(|e| format!("servo: goal angle: {e}"))?.angle_rad;
+    ServoGoal { st: [0.0, 0.0], angle_rad, parallax_px: [0.0; 3] }.offset_by(model, &target, offset).map_err(|e| format!("servo: goal: {e}"))
+}
+
 impl ServoPhase {
-    /// Builds the servo and its goal from the current views (called once, on entry).
+    /// Plans the goal and the coarse approach from the current views (called once, on entry).
     pub fn new(m: &mut Mission, c: &Cycle<'_>) -> Result<Self, String> {
         let cal = m.calibration.clone().ok_or("servo: not calibrated")?;
         let hint = m.hint.as_ref().ok_or("servo: no operator hint")?;
@@ -86,13 +123,13 @@ impl ServoPhase {
             ..ServoConfig::default()
         };
         let servo = CoplanarityServo::new(cal.servo_model, config).map_err(|e| format!("servo: {e}"))?;
-        let (target, gripper) = views(m)?;
+        let (target, _) = views(m)?;
         let model = &cal.servo_model;
         // Facet normal from the reconstructed basis, horizontal, towards the cameras.
-        let d1 = model.reconstruct_direction(&handeye_vision::servo::StereoPoint { left: target.left.e1, right: target.right.e1 });
-        let d2 = model.reconstruct_direction(&handeye_vision::servo::StereoPoint { left: target.left.e2, right: target.right.e2 });
+        let d1 = model.reconstruct_direction(&StereoPoint { left: target.left.e1, right: target.right.e1 });
+        let d2 = model.reconstruct_direction(&StereoPoint { left: target.left.e2, right: target.right.e2 });
         let mut n = d1.cross(&d2);
-        if n.norm() < 1e-12 {
+        if !(n.norm() > 1e-12) {
             return Err("servo: the target facet reconstructs as a line".into());
         }
         n /= n.norm();
@@ -103,54 +140,45 @@ impl ServoPhase {
             return Err(format!("servo: the target facet is {:.0}° from vertical; the jaws close horizontally", n.z.abs().asin().to_degrees()));
         }
         let n = Vector3::new(n.x, n.y, 0.0).normalize();
-        // Heights from reconstructed image points (differences only: the calibration's
-        // constant offset between reference point and tool point cancels).
-        let centre_z = model.reconstruct(&handeye_vision::servo::StereoPoint { left: target.left.o, right: target.right.o }).z;
-        let (l, r) = (
-            m.trackers.get(Role::Target, View::Left).ok_or("servo: no target tracker")?,
-            m.trackers.get(Role::Target, View::Right).ok_or("servo: no target tracker")?,
-        );
-        let bottom_z = l
-            .corners()
-            .zip(r.corners())
-            .map(|(a, b)| model.reconstruct(&handeye_vision::servo::StereoPoint { left: [a.x, a.y], right: [b.x, b.y] }).z)
-            .fold(f64::INFINITY, f64::min);
         let up = Vector3::z();
         let a = up.cross(&n);
-        let t = m.cfg.gripper.tool_from_reference_m;
-        // Plate reference point at the goal, relative to the facet centre.
-        let tool_rel = -n * (depth_m / 2.0) + up * (bottom_z + s.grasp_height_m + s.standoff_above_m - centre_z);
-        let offset = tool_rel - (a * t[0] + up * t[1] + n * t[2]);
-        // Goal angle: the plate's horizontal axis `a` lies along the facet's horizontal.
-        let ma = cal.model.m * a;
-        let axis_view = GripperView { axis: handeye_vision::servo::StereoPoint { left: [ma[0], ma[1]], right: [ma[2], ma[3]] }, ..gripper };
-        let angle_rad = ServoGoal::teach(model, &target, &axis_view).map_err(|e| format!("servo: goal angle: {e}"))?.angle_rad;
-        let goal = ServoGoal { st: [0.0, 0.0], angle_rad, parallax_px: [0.0; 3] }
-            .offset_by(model, &target, &offset)
-            .map_err(|e| format!("servo: goal: {e}"))?;
-        // The coarse approach: the goal pose in robot coordinates, from the reconstruction.
         // The model maps tool positions to the reference point's images, so a scene point P
         // reconstructs as P − (reference − tool) at the calibration's yaw.
         let yaw_now = f64::from(c.robot.tool_yaw_rad);
         let cal_lever = tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw_now));
-        let facet_centre = model.reconstruct(&handeye_vision::servo::StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
+        let facet_centre = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
+        // Thesis §6.3.4: make the plate coplanar with the facet (zero parallax: insensitive to
+        // the model's scale), the tool above the facet's centre at the stand-off height with
+        // the jaws behind the facet plane; the grasp then moves by metric offsets that the
+        // robot's own kinematics make exact.
+        let tool_z = m.cfg.grasp.table_z_m + s.grasp_height_m + s.standoff_above_m;
+        let t = m.cfg.gripper.tool_from_reference_m;
+        // Reference point relative to the facet centre: in the facet plane, straight above.
+        let offset_m = up * (tool_z - facet_centre.z - t[1]) - a * t[0];
+        let tool_rel = offset_m + a * t[0] + up * t[1] + n * t[2];
+        let goal = goal_for(model, &cal.model.m, m, &offset_m, &a)?;
         let tool_goal = facet_centre + tool_rel;
         let n0 = m.cfg.gripper.normal_at_zero_yaw;
         let yaw_goal = yaw_now + wrap(n.y.atan2(n.x) - n0[1].atan2(n0[0]) - yaw_now);
         m.servo_trace.clear();
         m.servo_steps = 0;
         m.snapshot = Some("servo_start");
-        m.set_status("servo: aligning the plate with the facet");
-        tracing::info!(?offset, ?goal, "servo goal");
+        m.set_status("servo: coarse approach from the reconstruction");
+        tracing::info!(?offset_m, ?tool_goal, yaw_goal, "servo plan");
         Ok(Self {
             start_frame: c.frame_index,
-            approach: Some(([tool_goal.x, tool_goal.y, tool_goal.z], yaw_goal)),
-            approaching: false,
-            servo,
-            goal,
+            stage: Stage::Approach,
             wait: None,
-            converging: false,
-            approach_m: [0.0, 0.0, -s.standoff_above_m],
+            servo,
+            config,
+            goal,
+            offset_m,
+            plate_a: a,
+            approach_pose: ([tool_goal.x, tool_goal.y, tool_goal.z], yaw_goal),
+            local_robot_m: Vec::with_capacity(LOCAL_CAGE.len()),
+            local_image_px: Vec::with_capacity(LOCAL_CAGE.len()),
+            acc: [0.0; 7],
+            approach_m: (n * (-t[2] - depth_m / 2.0)).into(),
         })
     }
 
@@ -158,32 +186,92 @@ impl ServoPhase {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.timeout_s) {
             return Step::Fail(format!("servo: not converged after {} s ({} steps)", m.cfg.servo.timeout_s, m.servo_steps));
         }
-        if let Some((p, yaw)) = self.approach.take() {
-            self.wait = Some(MoveWait::new(c.seq, c.frame_index));
-            self.approaching = true;
-            m.set_status("servo: coarse approach from the reconstruction");
-            return Step::Stay(Cmd::move_to(p, yaw, m.cfg.servo.speed_mps));
-        }
         if let Some(w) = self.wait.as_mut() {
             match w.poll(c, m.cfg.servo.settle_frames) {
                 MovePoll::Pending => return Step::Stay(Cmd::HOLD),
-                MovePoll::Rejected(code) if self.approaching => {
-                    return Step::Fail(format!("servo: the robot refused the coarse approach: {}", reject_text(code)));
-                }
-                MovePoll::Rejected(code) => return Step::Fail(format!("servo: the robot refused a servo move: {}", reject_text(code))),
+                MovePoll::Rejected(code) => return Step::Fail(format!("servo: the robot refused a move ({:?}): {}", self.stage, reject_text(code))),
                 MovePoll::Done => self.wait = None,
             }
-            if self.approaching {
-                self.approaching = false;
-                m.set_status("servo: aligning the plate with the facet");
+        }
+        let speed = m.cfg.servo.speed_mps;
+        match self.stage {
+            Stage::Approach => {
+                self.wait = Some(MoveWait::new(c.seq, c.frame_index));
+                let (p, yaw) = self.approach_pose;
+                self.stage = if m.cfg.servo.local_cage_m > 0.0 {
+                    Stage::LocalCage { i: 0, n: 0 }
+                } else {
+                    m.set_status("servo: aligning the plate with the facet");
+                    Stage::Servo { converging: false }
+                };
+                Step::Stay(Cmd::move_to(p, yaw, speed))
             }
-            if self.converging {
+            Stage::LocalCage { i, n } => self.local_cage(m, c, i, n),
+            Stage::Servo { converging: true } => {
                 m.snapshot = Some("servo_converged");
                 m.set_status("servo converged");
-                return Step::Next(Cmd::HOLD);
+                Step::Next(Cmd::HOLD)
             }
+            Stage::Servo { converging: false } => self.look_and_move(m, c),
         }
-        // A fresh frame with the arm settled: look, then move.
+    }
+
+    /// At local cage point `i` (arrived and settled): sample, then move on; after the last,
+    /// fit the local model and start the servo with it.
+    fn local_cage(&mut self, m: &mut Mission, c: &Cycle<'_>, i: usize, n: u32) -> Step {
+        let (Some(l), Some(r)) = (m.trackers.get(Role::Gripper, View::Left), m.trackers.get(Role::Gripper, View::Right)) else {
+            return Step::Fail("servo: no gripper trackers".into());
+        };
+        let st = nalgebra::Vector2::new(m.plate.reference_st[0], m.plate.reference_st[1]);
+        let (pl, pr) = (l.image_from_template(st), r.image_from_template(st));
+        let p = c.robot.tool_pos_m.map(f64::from);
+        for (acc, v) in self.acc.iter_mut().zip([pl.x, pl.y, pr.x, pr.y, p[0], p[1], p[2]]) {
+            *acc = if n == 0 { v } else { *acc + v };
+        }
+        let n = n + 1;
+        if n < m.cfg.calibration.samples {
+            self.stage = Stage::LocalCage { i, n };
+            return Step::Stay(Cmd::HOLD);
+        }
+        let k = f64::from(n);
+        self.local_image_px.push([self.acc[0] / k, self.acc[1] / k, self.acc[2] / k, self.acc[3] / k]);
+        self.local_robot_m.push(Vector3::new(self.acc[4] / k, self.acc[5] / k, self.acc[6] / k));
+        let speed = m.cfg.servo.speed_mps;
+        if i + 1 < LOCAL_CAGE.len() {
+            self.stage = Stage::LocalCage { i: i + 1, n: 0 };
+            self.wait = Some(MoveWait::new(c.seq, c.frame_index));
+            let d = m.cfg.servo.local_cage_m;
+            let (p0, yaw) = self.approach_pose;
+            let o = LOCAL_CAGE[i + 1];
+            m.set_status("servo: local cage around the approach pose");
+            return Step::Stay(Cmd::move_to([p0[0] + d * o[0], p0[1] + d * o[1], p0[2] + d * o[2]], yaw, speed));
+        }
+        // Fit (7 points: microseconds, so on the loop), then back to the approach pose.
+        let local = AffineStereo::fit(&self.local_robot_m, &self.local_image_px).map_err(|e| format!("servo: local fit: {e}"));
+        let local = match local.and_then(|f| ServoModel::new(&f).map(|s| (f, s)).map_err(|e| format!("servo: local model: {e}"))) {
+            Ok(x) => x,
+            Err(e) => return Step::Fail(e),
+        };
+        if local.0.residual_rms_px > m.cfg.calibration.max_residual_px {
+            return Step::Fail(format!("servo: local cage residual {:.2} px RMS is too large", local.0.residual_rms_px));
+        }
+        self.goal = match goal_for(&local.1, &local.0.m, m, &self.offset_m, &self.plate_a) {
+            Ok(g) => g,
+            Err(e) => return Step::Fail(e),
+        };
+        self.servo = match CoplanarityServo::new(local.1, self.config) {
+            Ok(s) => s,
+            Err(e) => return Step::Fail(format!("servo: {e}")),
+        };
+        tracing::info!(residual_px = local.0.residual_rms_px, goal = ?self.goal, "local model");
+        self.stage = Stage::Servo { converging: false };
+        self.wait = Some(MoveWait::new(c.seq, c.frame_index));
+        m.set_status("servo: aligning the plate with the facet");
+        let (p0, yaw) = self.approach_pose;
+        Step::Stay(Cmd::move_to(p0, yaw, speed))
+    }
+
+    fn look_and_move(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let (target, gripper) = match views(m) {
             Ok(v) => v,
             Err(e) => return Step::Fail(e),
@@ -194,6 +282,7 @@ impl ServoPhase {
             for (dst, src) in m.servo_error.iter_mut().zip(meas.error.iter()) {
                 *dst = *src;
             }
+            tracing::debug!(step = step.step, error = ?meas.error, across = ?meas.parallax.map(|p| p.across_px), "servo step");
         }
         if m.servo_trace.len() < m.servo_trace.capacity() {
             m.servo_trace.push(ServoTraceRow {
@@ -204,13 +293,12 @@ impl ServoPhase {
                 offset_yaw_rad: step.offset.yaw_rad,
             });
         }
-        if let Some(meas) = step.measurement {
-            tracing::debug!(step = step.step, error = ?meas.error, across = ?meas.parallax.map(|p| p.across_px), offset = ?step.offset, "servo step");
-        }
         match step.outcome {
             StepOutcome::Failed(f) => Step::Fail(format!("servo: {f}")),
             StepOutcome::Move | StepOutcome::Converged => {
-                self.converging = step.outcome == StepOutcome::Converged;
+                if step.outcome == StepOutcome::Converged {
+                    self.stage = Stage::Servo { converging: true };
+                }
                 let cmd = self.tool_move(m, c, &step.motion);
                 self.wait = Some(MoveWait::new(c.seq, c.frame_index));
                 Step::Stay(cmd)
