@@ -14,13 +14,13 @@ use handeye_wire::{robot_flags, GripperCommand};
 use super::{timed_out, Cmd, Cycle, Job, JobResult, Mission, Step};
 use crate::gripper::find_plate;
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug)]
 enum Stage {
     /// Jaws opening (or open), waiting for them and the arm to be still.
     Open { still: u32 },
     Close { sent_frame: Option<u64>, still: u32 },
     /// Location running on the worker; the jaws reopen meanwhile.
-    Locating { submitted: bool },
+    Locating { submitted: Option<u64>, result: Option<JobResult> },
     Converging { frames: u32 },
 }
 
@@ -71,17 +71,17 @@ impl AcquireGripper {
                 *n = if still(c, true, c.frame_index - sent, patience) { *n + 1 } else { 0 };
                 if *n > settle {
                     self.closed = Some([c.left.to_owned(), c.right.to_owned()]);
-                    self.stage = Stage::Locating { submitted: false };
+                    self.stage = Stage::Locating { submitted: None, result: None };
                     m.set_status("acquire gripper: locating the moving fingers");
                     return Step::Stay(Cmd::gripper(GripperCommand::Open));
                 }
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Locating { submitted } => {
-                if !*submitted {
+            Stage::Locating { submitted, result } => {
+                if submitted.is_none() {
                     if let (Some(open), Some(closed)) = (self.open.take(), self.closed.take()) {
                         match m.worker.try_submit(Job::LocateGripper { open, closed }) {
-                            Ok(()) => *submitted = true,
+                            Ok(()) => *submitted = Some(c.frame_index),
                             Err(Job::LocateGripper { open, closed }) => {
                                 self.open = Some(open);
                                 self.closed = Some(closed);
@@ -91,7 +91,13 @@ impl AcquireGripper {
                     }
                     return Step::Stay(Cmd::HOLD);
                 }
-                match m.worker.try_result() {
+                if result.is_none() {
+                    *result = m.worker.try_result();
+                }
+                if submitted.is_some_and(|f| c.frame_index < f + super::WORKER_DELAY_FRAMES) {
+                    return Step::Stay(Cmd::HOLD);
+                }
+                match result.take() {
                     None => Step::Stay(Cmd::HOLD),
                     Some(JobResult::Plate(Ok(plates))) => {
                         for (view, corners) in [View::Left, View::Right].into_iter().zip(plates) {

@@ -20,7 +20,7 @@ enum Stage {
     /// Averaging samples at point `i`.
     Sampling { i: usize, n: u32 },
     /// Fit submitted; the arm moves back.
-    Fitting { wait: Option<MoveWait>, submitted: bool },
+    Fitting { wait: Option<MoveWait>, submitted: Option<u64> },
 }
 
 pub struct Calibrate {
@@ -87,10 +87,13 @@ impl Calibrate {
             }
             Stage::Sampling { .. } => self.sample(m, c),
             Stage::Fitting { wait, submitted } => {
-                if !*submitted {
+                if submitted.is_none() {
                     let job = Job::Calibrate { robot_m: self.robot_m.clone(), image_px: self.image_px.clone() };
-                    *submitted = m.worker.try_submit(job).is_ok();
+                    if m.worker.try_submit(job).is_ok() {
+                        *submitted = Some(c.frame_index);
+                    }
                 }
+                let ready = submitted.is_some_and(|f| c.frame_index >= f + super::WORKER_DELAY_FRAMES);
                 let Some(w) = wait else {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
                     m.set_status("calibrate: fitting; arm returning");
@@ -103,7 +106,7 @@ impl Calibrate {
                     MovePoll::Done => self.arrived_back = true,
                     MovePoll::Pending => {}
                 }
-                if self.fitted.is_none() {
+                if self.fitted.is_none() && ready {
                     match m.worker.try_result() {
                         None => {}
                         Some(JobResult::Calibration(Ok(fit))) => self.fitted = Some(fit),
@@ -164,7 +167,7 @@ impl Calibrate {
         self.stage = if next < m.cfg.calibration.cage_m.len() {
             Stage::Moving { i: next, wait: None }
         } else {
-            Stage::Fitting { wait: None, submitted: false }
+            Stage::Fitting { wait: None, submitted: None }
         };
         Step::Stay(Cmd::HOLD)
     }

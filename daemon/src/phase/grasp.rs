@@ -52,6 +52,7 @@ impl Grasp {
                     MovePoll::Done => {
                         self.stage = GraspStage::Down { wait: Some(MoveWait::new(c.seq, c.frame_index)) };
                         m.set_status("grasp: descending");
+                        m.snapshot = Some("over_target");
                         // Down to the grasp height above the table by the robot's own
                         // kinematics (exact, unlike an image-derived height).
                         let dz = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m - f64::from(c.robot.tool_pos_m[2]);
@@ -67,6 +68,7 @@ impl Grasp {
                     MovePoll::Done => {
                         self.stage = GraspStage::Close { since: None };
                         m.set_status("grasp: closing");
+                        m.snapshot = Some("closing");
                         Step::Stay(Cmd::gripper(GripperCommand::Close))
                     }
                 }

@@ -115,10 +115,17 @@ pub enum Job {
 }
 
 /// Results from the worker.
+#[derive(Debug)]
 pub enum JobResult {
     Plate(Result<[[[f64; 2]; 4]; 2], String>),
     Calibration(Result<(AffineStereo, EpipolarConstraint, f64), String>),
 }
+
+/// Frames after submission at which a worker result is taken (it waits if it is early).
+/// A fixed pipeline delay keeps lockstep runs repeatable: the worker's wall-clock speed
+/// never decides on which frame the loop moves on. 1 s at 30 frames/s is far more than
+/// either job needs, and the loop keeps tracking and answering frames meanwhile.
+pub const WORKER_DELAY_FRAMES: u64 = 30;
 
 /// The worker's job function.
 pub fn run_job(job: Job) -> JobResult {
