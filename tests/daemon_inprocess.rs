@@ -52,6 +52,8 @@ fn debug_target_tracking() {
                 eprintln!("true J left at {k}: {:?}", j);
             }
             eprintln!("model M left: [{:.0}, {:.0}], [{:.0}, {:.0}], [{:.0}, {:.0}]", m[(0,0)], m[(1,0)], m[(0,1)], m[(1,1)], m[(0,2)], m[(1,2)]);
+            let pn = sim.arm_reading().palm_rot * handeye_sim::glam::DVec3::Y;
+            eprintln!("AZIMUTH facet {:.1}° plate {:.1}° yaw {:.1}°", n.y.atan2(n.x).to_degrees(), pn.y.atan2(pn.x).to_degrees(), sim.arm_reading().yaw_rad().to_degrees());
             eprintln!("TRUTH ref-facet: along n {:.1} mm (want 0), up {:.1} mm (want 150), lateral {:.1} mm; tool {:?}", d.dot(n) * 1e3, d.z * 1e3, (d - n * d.dot(n)).truncate().length() * 1e3, sim.arm_reading().tool_m);
         }
         if matches!(p, Phase::Failed | Phase::Stopped | Phase::Done) {

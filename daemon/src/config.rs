@@ -179,7 +179,7 @@ pub struct AcquireConfig {
 
 impl Default for AcquireConfig {
     fn default() -> Self {
-        Self { settle_frames: 4, converge_frames: 10, min_score: 0.5, min_plate_area_px2: 300.0, timeout_s: 20.0 }
+        Self { settle_frames: 4, converge_frames: 15, min_score: 0.5, min_plate_area_px2: 300.0, timeout_s: 20.0 }
     }
 }
 
@@ -197,7 +197,7 @@ pub struct TargetConfig {
 
 impl Default for TargetConfig {
     fn default() -> Self {
-        Self { converge_frames: 10, min_score: 0.35, max_epipolar_px: 8.0, timeout_s: 10.0 }
+        Self { converge_frames: 15, min_score: 0.35, max_epipolar_px: 8.0, timeout_s: 10.0 }
     }
 }
 

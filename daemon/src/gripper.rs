@@ -81,10 +81,37 @@ pub fn gripper_view(plate: &PlateTemplate, left: &ContourTracker, right: &Contou
     }
 }
 
-/// A facet's affine frame in one view from its tracker: origin at the template centre, `e1`
-/// and `e2` the local images of the template axes.
+/// A facet's affine frame in one view from its tracker: the least-squares affine map from
+/// the template's corners to where the tracker puts them in the image (origin = the image of
+/// the template origin). Over the whole outline, this is steadier than the placement's local
+/// derivative at the centre, and the plane transfer the servo builds from the two views'
+/// frames is extrapolated far (to the gripper plate), so its steadiness is what counts.
+/// No allocation (corners are accumulated on the fly).
 pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
-    AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) }
+    // Normal equations of p = o + E q over the corners, centred.
+    let (mut n, mut qm, mut pm) = (0.0, Vector2::zeros(), Vector2::zeros());
+    for (q, p) in t.template().corners().iter().zip(t.corners()) {
+        n += 1.0;
+        qm += q;
+        pm += p;
+    }
+    if n < 3.0 {
+        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+    }
+    qm /= n;
+    pm /= n;
+    let (mut qq, mut pq) = (nalgebra::Matrix2::zeros(), nalgebra::Matrix2::zeros());
+    for (q, p) in t.template().corners().iter().zip(t.corners()) {
+        let (dq, dp) = (q - qm, p - pm);
+        qq += dq * dq.transpose();
+        pq += dp * dq.transpose();
+    }
+    let Some(inv) = qq.try_inverse() else {
+        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+    };
+    let e = pq * inv;
+    let o = pm - e * qm;
+    AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] }
 }
 
 pub fn stereo_frame(left: &ContourTracker, right: &ContourTracker) -> StereoFrame {
@@ -282,4 +309,68 @@ mod tests {
         let blank = ImageBuf::filled(320, 240, 110);
         assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
     }
+}
+
+/// Corners of a polygon refined from the tracker's last edges: each inlier edge point is
+/// assigned to the nearest side of the tracked outline, a line is fitted to each side (total
+/// least squares), and adjacent lines are intersected. A template built from a clicked or
+/// coarsely found polygon keeps that polygon's shape errors (an operator's ±3 px on a
+/// 30 px facet); refining the corners from the image and restarting the tracker removes
+/// them. `None` when a side has too few edges or lines are near parallel. Allocates (once
+/// per refinement, while acquiring).
+pub fn refine_polygon(t: &ContourTracker) -> Option<Vec<[f64; 2]>> {
+    let corners: Vec<Vector2<f64>> = t.corners().collect();
+    let k = corners.len();
+    if k < 3 {
+        return None;
+    }
+    let mut sides: Vec<Vec<Vector2<f64>>> = vec![Vec::new(); k];
+    for e in t.inlier_edges() {
+        let mut best = (f64::INFINITY, 0);
+        for j in 0..k {
+            let (a, b) = (corners[j], corners[(j + 1) % k]);
+            let ab = b - a;
+            let f = ((e - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+            let d = (a + ab * f - e).norm();
+            if d < best.0 {
+                best = (d, j);
+            }
+        }
+        sides[best.1].push(e);
+    }
+    // Each side as (point, unit direction).
+    let mut lines = Vec::with_capacity(k);
+    for pts in &sides {
+        if pts.len() < 5 {
+            return None;
+        }
+        let c = pts.iter().sum::<Vector2<f64>>() / pts.len() as f64;
+        let mut s = nalgebra::Matrix2::zeros();
+        for p in pts {
+            let d = p - c;
+            s += d * d.transpose();
+        }
+        let eig = s.symmetric_eigen();
+        let i = if eig.eigenvalues[0] > eig.eigenvalues[1] { 0 } else { 1 };
+        lines.push((c, eig.eigenvectors.column(i).into_owned()));
+    }
+    let mut out = Vec::with_capacity(k);
+    for j in 0..k {
+        let (p, u) = lines[(j + k - 1) % k];
+        let (q, v) = lines[j];
+        // p + s u = q + r v
+        let det = u.x * (-v.y) - u.y * (-v.x);
+        if det.abs() < 0.1 {
+            return None;
+        }
+        let w = q - p;
+        let s = (w.x * (-v.y) - w.y * (-v.x)) / det;
+        let x = p + u * s;
+        // A refined corner far from the tracked one means a side latched onto something else.
+        if (x - corners[j]).norm() > 8.0 {
+            return None;
+        }
+        out.push([x.x, x.y]);
+    }
+    Some(out)
 }

@@ -175,15 +175,18 @@ impl Runner {
         Ok([0, 1].map(|v| self.ids[v * n..(v + 1) * n].iter().filter(|&&x| x == id).count() as u32))
     }
 
-    /// Reads the daemon's telemetry that has arrived and judges it at frame `frame`; renders
-    /// the face-id pass when an occlusion is being watched for.
+    /// Reads the daemon's telemetry that has arrived and judges it at frame `frame`; while an
+    /// occluder crosses the scene, renders the face-id pass to see whether it hides the target.
     pub fn watch_daemon(&mut self, transport: &mut dyn Transport, frame: u64) -> Result<(), RunError> {
         self.telemetry.clear();
         transport.receive_telemetry(&mut self.telemetry)?;
         for t in &self.telemetry {
             self.watch.telemetry(&self.sim, frame, t);
         }
-        if self.watch.wants_visibility()
+        let now = self.sim.now_ns();
+        let occluded = (0..self.sim.scenario.events.len()).any(|i| self.sim.events.occluder_position(i, now).is_some());
+        if occluded
+            && self.watch.wants_visibility()
             && let Some(f) = self.watch.facet()
         {
             let px = self.face_visible_px(f.block, f.face)?;

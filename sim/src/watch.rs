@@ -17,8 +17,8 @@
 //!
 //! It also records when each phase first appeared, when the daemon stopped or failed (and
 //! why), the first `Stop` command, and, when the scenario has an occluder, the first frame on
-//! which the target facet is hidden (fewer than half of its pixels at hint time visible in
-//! either view), so a test can tell how quickly the daemon reacted.
+//! which an occluder hides the target facet (fewer than half of its pixels at hint time
+//! visible in either view while an occluder crosses the scene), so a test can tell how quickly the daemon reacted.
 
 use glam::DVec3;
 use handeye_wire::{CommandKind, Phase, RobotCommand, Telemetry};

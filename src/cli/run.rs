@@ -241,9 +241,11 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
             note = Some(format!("timed out after {:.0} s of wall time", args.timeout_s));
             break;
         }
-        if d.is_some() {
-            // The simulator stops by itself on success; otherwise it would step on alone.
-            let grace = Instant::now() + Duration::from_secs(5);
+        if let Some(status) = d {
+            // The simulator stops by itself on success; otherwise it would step on alone
+            // until its time-out, so it is stopped at once when the daemon did not succeed.
+            let wait = if status.success() { Duration::from_secs(10) } else { Duration::ZERO };
+            let grace = Instant::now() + wait;
             while sim.poll().is_none() && Instant::now() < grace {
                 std::thread::sleep(Duration::from_millis(20));
             }
@@ -262,6 +264,10 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     daemon.stop(Duration::from_secs(3));
     sim.stop(Duration::from_secs(5));
     let wall_s = start.elapsed().as_secs_f64();
+    if args.domain.is_none() {
+        // A private domain: nobody else uses its files.
+        let _ = handeye_wire::domain::remove_domain_files(&domain);
+    }
     let d = read_json(&dir.join("daemon.json"));
     let v = read_json(&dir.join("sim.json"));
     if d.is_none() && v.is_none() {

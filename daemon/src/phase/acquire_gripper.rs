@@ -121,6 +121,17 @@ impl AcquireGripper {
                     return Step::Fail("acquire_gripper: a plate tracker was lost while converging".into());
                 }
                 *frames += 1;
+                // Refine the found corners from the plate's edges, twice (see
+                // `gripper::refine_polygon`): the marks' accuracy rests on this outline.
+                let third = m.cfg.acquire.converge_frames / 3;
+                if third > 0 && (*frames == third || *frames == 2 * third) {
+                    for view in View::ALL {
+                        let Some(t) = m.trackers.get_mut(Role::Gripper, view) else { continue };
+                        if let Some(corners) = crate::gripper::refine_polygon(t) {
+                            let _ = t.reinit(&corners);
+                        }
+                    }
+                }
                 if *frames < m.cfg.acquire.converge_frames {
                     return Step::Stay(Cmd::HOLD);
                 }

@@ -58,6 +58,17 @@ impl AcquireTarget {
             return Step::Stay(Cmd::HOLD);
         }
         self.frames += 1;
+        // Twice while converging: refine the hinted corners from the image's edges and restart
+        // the trackers on them (the hint's corner errors would otherwise stay in the template).
+        let half = m.cfg.target.converge_frames / 3;
+        if half > 0 && (self.frames == half || self.frames == 2 * half) {
+            for view in View::ALL {
+                let Some(t) = m.trackers.get_mut(Role::Target, view) else { continue };
+                if let Some(corners) = crate::gripper::refine_polygon(t) {
+                    let _ = t.reinit(&corners);
+                }
+            }
+        }
         if self.frames < m.cfg.target.converge_frames {
             return Step::Stay(Cmd::HOLD);
         }
