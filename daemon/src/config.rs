@@ -311,7 +311,7 @@ impl Default for SafetyConfig {
             workspace_max_m: [0.8, 0.8, 0.8],
             max_state_jump_m: 0.05,
             state_stale_frames: 6,
-            min_tracker_score: 0.2,
+            min_tracker_score: 0.6,
         }
     }
 }
