@@ -19,7 +19,20 @@ use crate::config::DaemonConfig;
 use crate::hint::OperatorHint;
 use crate::outcome::DaemonOutcome;
 use crate::phase::{acquire_gripper::AcquireGripper, Cmd, Cycle, Mission, PhaseState, Step};
+use crate::recovery::RecoveryStep;
 use crate::safety::{check_robot, check_trackers};
+
+/// The view whose gripper and target trackers are both lost (or unsure) while the other
+/// view tracks both confidently.
+fn moved_view(states: &StereoStates, trackers: &handeye_vision::tracker::StereoTrackerSet, min_score: f64) -> Option<View> {
+    let ok = |r: Role, v: View| {
+        matches!(states.get(r, v), Some(s) if s.is_tracking()) && trackers.get(r, v).is_some_and(|t| t.confidence().score >= min_score)
+    };
+    [View::Left, View::Right].into_iter().find(|&v| {
+        let other = if v == View::Left { View::Right } else { View::Left };
+        !ok(Role::Gripper, v) && !ok(Role::Target, v) && ok(Role::Gripper, other) && ok(Role::Target, other)
+    })
+}
 use crate::timing::LatencyHistogram;
 
 /// The daemon's state between frames.
@@ -40,6 +53,10 @@ pub struct HardLoop {
     command: RobotCommand,
     telemetry: Telemetry,
     stopped_at_frame: Option<u64>,
+    /// Re-acquiring one view after its camera moved (servo only).
+    recovery: Option<crate::recovery::Recovery>,
+    /// Camera knocks recovered from.
+    pub recoveries: u32,
 }
 
 impl HardLoop {
@@ -61,6 +78,8 @@ impl HardLoop {
             command: RobotCommand::default(),
             telemetry: Telemetry::default(),
             stopped_at_frame: None,
+            recovery: None,
+            recoveries: 0,
         })
     }
 
@@ -131,7 +150,42 @@ impl HardLoop {
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
+        if let Some(rec) = self.recovery.as_mut() {
+            let other = if rec.view == View::Left { View::Right } else { View::Left };
+            let other_tracking = [Role::Gripper, Role::Target].iter().all(|&r| matches!(states.get(r, other), Some(s) if s.is_tracking()));
+            let image = if rec.view == View::Left { left } else { right };
+            match rec.step(&mut self.mission.trackers, image, other_tracking) {
+                RecoveryStep::Searching => return Cmd::HOLD,
+                RecoveryStep::Recovered { shift_px } => {
+                    tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
+                    self.recovery = None;
+                    self.recoveries += 1;
+                    self.mission.snapshot = Some("reacquired");
+                    if let PhaseState::Servo(p) = &mut self.phase {
+                        p.resume(&mut self.mission);
+                    }
+                    return Cmd::HOLD;
+                }
+                RecoveryStep::Failed(reason) => {
+                    self.recovery = None;
+                    self.stop_reason(Phase::Stopped, format!("camera moved, trackers not re-acquired: {reason}"));
+                    return Cmd::STOP;
+                }
+            }
+        }
         if let Err(reason) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
+            // Both trackers of one view lost while the other view holds both: that camera
+            // moved. Stop the arm and try to re-acquire (servo only; elsewhere, stop).
+            if phase == Phase::Servo
+                && let Some(view) = moved_view(&states, &self.mission.trackers, self.mission.cfg.safety.min_tracker_score)
+                && let Some(rec) = crate::recovery::Recovery::start(&self.mission.trackers, view, frame_index)
+            {
+                tracing::warn!(?view, %reason, "a camera seems to have moved: stopping and re-acquiring");
+                self.recovery = Some(rec);
+                self.mission.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
+                self.mission.snapshot = Some("camera_moved");
+                return Cmd::STOP;
+            }
             self.stop_reason(Phase::Stopped, reason);
             return Cmd::STOP;
         }

@@ -14,6 +14,7 @@ pub mod hard_loop;
 pub mod hint;
 pub mod outcome;
 pub mod phase;
+pub mod recovery;
 pub mod report;
 pub mod safety;
 pub mod service;

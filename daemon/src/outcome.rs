@@ -28,6 +28,8 @@ pub struct DaemonOutcome {
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
+    /// Camera knocks the trackers recovered from.
+    pub recoveries: u32,
     pub servo_trace: Vec<ServoTraceRow>,
     pub wall_s: f64,
 }
@@ -54,6 +56,7 @@ impl DaemonOutcome {
             calibration: l.mission.calibration.as_ref().map(|c| c.stats),
             grip_width_mm: l.mission.grip_width_m.map(|w| w * 1e3),
             stop_frame_id: l.stopped_at_frame(),
+            recoveries: l.recoveries,
             servo_trace: l.mission.servo_trace.clone(),
             wall_s,
         }

@@ -216,6 +216,15 @@ impl ServoPhase {
         }
     }
 
+    /// Picks up again after the arm was stopped for a re-acquisition: the pending move is
+    /// void (the arm stopped where it was), the servo starts afresh from a new look.
+    pub fn resume(&mut self, m: &mut Mission) {
+        self.wait = None;
+        self.servo.reset();
+        self.stage = Stage::Servo { converging: false };
+        m.set_status("servo: resumed after re-acquiring");
+    }
+
     /// At local cage point `i` (arrived and settled): sample, then move on; after the last,
     /// fit the local model and start the servo with it.
     fn local_cage(&mut self, m: &mut Mission, c: &Cycle<'_>, i: usize, n: u32) -> Step {
