@@ -102,6 +102,12 @@ impl Recovery {
             if !t.update(image, 0.0).is_tracking() || !t.update(image, 0.0).is_tracking() {
                 continue;
             }
+            // Same size as before the knock: the plate's dark border has an outer edge too, and
+            // a contour grown onto it tracks just as confidently.
+            let ratio = t.frame().det() / self.gripper_frame.det();
+            if !(0.85..=1.18).contains(&ratio) {
+                continue;
+            }
             let score = t.confidence().score;
             if self.best.is_none_or(|b| score > b.0) {
                 // The shift the tracker converged to, finer than the grid.
