@@ -98,6 +98,10 @@ pub struct GripperModel {
     /// the yaw). The robot turns the tool about the vertical through the tool point; the
     /// servo turns about the plate's reference point, and this converts one into the other.
     pub normal_at_zero_yaw: [f64; 2],
+    /// The tracked rectangle is brighter than its surround (a light plate in a dark
+    /// border): its tracker then accepts only edges of that sign, so it can never slide onto
+    /// the border's outer edge.
+    pub plate_bright_inside: bool,
 }
 
 impl Default for GripperModel {
@@ -109,6 +113,7 @@ impl Default for GripperModel {
             tool_from_reference_m: [0.0, -0.100, -0.056],
             max_opening_m: 0.080,
             normal_at_zero_yaw: [0.0, 1.0],
+            plate_bright_inside: true,
         }
     }
 }
@@ -336,6 +341,21 @@ pub struct TrackerSettings {
 impl Default for TrackerSettings {
     fn default() -> Self {
         Self { points: 100, search_px: 12.0, min_contrast: 12, projective: true, target_deformation_velocity_gain: 0.0 }
+    }
+}
+
+impl DaemonConfig {
+    /// The configuration of the plate's contours.
+    pub fn plate_tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
+        let base = self.tracker.tracker_config();
+        if self.gripper.plate_bright_inside {
+            handeye_vision::tracker::TrackerConfig {
+                edge_sign: handeye_vision::tracker::EdgeSign::Fixed(handeye_vision::tracker::Polarity::BrightInside),
+                ..base
+            }
+        } else {
+            base
+        }
     }
 }
 

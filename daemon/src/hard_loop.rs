@@ -158,12 +158,13 @@ impl HardLoop {
                 RecoveryStep::Searching => return Cmd::HOLD,
                 RecoveryStep::Recovered { shift_px } => {
                     tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
-                    self.recovery = None;
                     self.recoveries += 1;
                     self.mission.snapshot = Some("reacquired");
+                    let view = rec.view;
                     if let PhaseState::Servo(p) = &mut self.phase {
-                        p.resume(&mut self.mission);
+                        p.resume(&mut self.mission, view, shift_px);
                     }
+                    self.recovery = None;
                     return Cmd::HOLD;
                 }
                 RecoveryStep::Failed(reason) => {

@@ -105,7 +105,7 @@ impl Recovery {
             // Same size as before the knock: the plate's dark border has an outer edge too, and
             // a contour grown onto it tracks just as confidently.
             let ratio = t.frame().det() / self.gripper_frame.det();
-            if !(0.85..=1.18).contains(&ratio) {
+            if !(0.9..=1.11).contains(&ratio) {
                 continue;
             }
             let score = t.confidence().score;

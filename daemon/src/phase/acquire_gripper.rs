@@ -101,7 +101,7 @@ impl AcquireGripper {
                     None => Step::Stay(Cmd::HOLD),
                     Some(JobResult::Plate(Ok(plates))) => {
                         for (view, corners) in [View::Left, View::Right].into_iter().zip(plates) {
-                            match ContourTracker::new(m.tracker_config, &corners) {
+                            match ContourTracker::new(m.cfg.plate_tracker_config(), &corners) {
                                 Ok(t) => {
                                     m.trackers.insert(Role::Gripper, view, t);
                                 }
