@@ -130,35 +130,3 @@ fn a_robot_fault_stops_the_arm_with_the_reason() {
     assert_eq!(o.final_phase, "stopped");
 }
 
-#[test]
-#[ignore]
-fn debug_bump() {
-    let mut run = InProcess::new(scenario("pick_cube_bump.toml"), DaemonConfig::default());
-    let mut was = Phase::Idle;
-    for _ in 0..3000 {
-        run.step();
-        let p = run.daemon.phase();
-        if p == Phase::Grasp && was == Phase::Servo {
-            let sim = &run.runner.sim;
-            let (pos, rot) = sim.world.body_pose(sim.world.arm.links[4]);
-            let corners: Vec<_> = handeye_sim::scene::plate_corners_in_palm().iter().map(|c| pos + rot * *c).collect();
-            let b = &sim.world.blocks[run.facet.block];
-            let (_, pose) = sim.block_pose(run.facet.block);
-            let f = &b.shape.faces[run.facet.face];
-            let fc: Vec<_> = f.corners.iter().map(|&c| pose.transform_point3(b.shape.corners[c])).collect();
-            let t = run.daemon.telemetry();
-            for v in 0..2 {
-                let cam = &sim.events.cameras[v];
-                let pc: Vec<_> = corners.iter().map(|&c| cam.project(c).unwrap()).collect();
-                let tc: Vec<_> = fc.iter().map(|&c| cam.project(c).unwrap()).collect();
-                eprintln!("view {v} plate truth {:?}\n        tracker {:?}", pc, &t.tracker_corners_px[v][..4]);
-                eprintln!("view {v} facet truth {:?}\n        tracker {:?}", tc, &t.tracker_corners_px[2 + v][..4]);
-            }
-            eprintln!("{:?}", run.runner.watch.converged);
-        }
-        was = p;
-        if matches!(p, Phase::Failed | Phase::Stopped | Phase::Done) {
-            break;
-        }
-    }
-}

@@ -109,8 +109,6 @@ mod tests {
         let states = set.update(&blank.view(), &blank.view(), 0.03);
         let err = check_trackers(&cfg, Phase::Servo, &states, &set).unwrap_err();
         assert!(err.contains("tracker lost"), "{err}");
-        let mut only_target = StereoStates::default();
-        let _ = &mut only_target;
         assert_eq!(check_trackers(&cfg, Phase::Grasp, &states, &set), Ok(()));
     }
 }

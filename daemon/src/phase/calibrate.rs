@@ -23,6 +23,32 @@ enum Stage {
     Fitting { wait: Option<MoveWait>, submitted: Option<u64> },
 }
 
+/// The calibration settings a cycle needs, copied (no allocation).
+#[derive(Debug, Clone, Copy)]
+struct CalibrationView {
+    points: usize,
+    speed_mps: f64,
+    settle_frames: u32,
+    point_timeout_s: f64,
+    max_residual_px: f64,
+    max_epipolar_px: f64,
+    park: Option<[f64; 3]>,
+}
+
+impl CalibrationView {
+    fn of(c: &crate::config::CalibrationConfig) -> Self {
+        Self {
+            points: c.cage_m.len(),
+            speed_mps: c.speed_mps,
+            settle_frames: c.settle_frames,
+            point_timeout_s: c.point_timeout_s,
+            max_residual_px: c.max_residual_px,
+            max_epipolar_px: c.max_epipolar_px,
+            park: (c.park_m.len() == 3).then(|| [c.park_m[0], c.park_m[1], c.park_m[2]]),
+        }
+    }
+}
+
 pub struct Calibrate {
     start_frame: u64,
     stage_frame: u64,
@@ -53,8 +79,9 @@ impl Calibrate {
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        let cfg = m.cfg.calibration.clone();
-        let points = cfg.cage_m.len();
+        // Scalars copied out so that `m` stays free to borrow mutably (no allocation).
+        let cfg = CalibrationView::of(&m.cfg.calibration);
+        let points = cfg.points;
         let limit = cfg.point_timeout_s * (points as f64 + 2.0);
         if timed_out(&m.cfg, self.start_frame, c.frame_index, limit) {
             return Step::Fail(format!("calibrate: timed out after {limit:.0} s at {:?}", self.stage));
@@ -69,14 +96,16 @@ impl Calibrate {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
                     self.stage_frame = c.frame_index;
                     m.set_status("calibrate: visiting the cage");
-                    return Step::Stay(Cmd::move_to(cfg.cage_m[i], self.yaw_rad, cfg.speed_mps));
+                    return Step::Stay(Cmd::move_to(m.cfg.calibration.cage_m[i], self.yaw_rad, cfg.speed_mps));
                 };
                 if timed_out(&m.cfg, self.stage_frame, c.frame_index, cfg.point_timeout_s) {
-                    return Step::Fail(format!("calibrate: cage point {i} {:?} not reached in {} s", cfg.cage_m[i], cfg.point_timeout_s));
+                    return Step::Fail(format!("calibrate: cage point {i} {:?} not reached in {} s", m.cfg.calibration.cage_m[i], cfg.point_timeout_s));
                 }
                 match w.poll(c, cfg.settle_frames) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
-                    MovePoll::Rejected(code) => Step::Fail(format!("calibrate: the robot refused cage point {i} {:?}: {}", cfg.cage_m[i], reject_text(code))),
+                    MovePoll::Rejected(code) => {
+                        Step::Fail(format!("calibrate: the robot refused cage point {i} {:?}: {}", m.cfg.calibration.cage_m[i], reject_text(code)))
+                    }
                     MovePoll::Done => {
                         self.acc_w = [0.0; 4];
                         self.acc_x = [0.0; 3];
@@ -98,7 +127,7 @@ impl Calibrate {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
                     m.set_status("calibrate: fitting; arm returning");
                     let (p, yaw) = m.start_pose.unwrap_or(([0.3, 0.0, 0.18], self.yaw_rad));
-                    let park = if cfg.park_m.len() == 3 { [cfg.park_m[0], cfg.park_m[1], cfg.park_m[2]] } else { p };
+                    let park = cfg.park.unwrap_or(p);
                     return Step::Stay(Cmd::move_to(park, yaw, cfg.speed_mps));
                 };
                 match w.poll(c, cfg.settle_frames) {

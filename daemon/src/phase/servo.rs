@@ -102,7 +102,15 @@ fn goal_for(model: &ServoModel, m_full: &nalgebra::Matrix4x3<f64>, m: &Mission, 
     // the affine plane transfer extrapolated from the small facet up to the plate. Keeping
     // the model's parallax cancels much of that bias (forcing zero left the plate 3-9 mm off
     // the plane over ten seeds, against 0.1-1.9 mm).
-    ServoGoal { st: [0.0, 0.0], angle_rad, parallax_px: [0.0; 3] }.offset_by(model, &target, offset).map_err(|e| format!("servo: goal: {e}"))
+    let goal = ServoGoal { st: [0.0, 0.0], angle_rad, parallax_px: [0.0; 3] }.offset_by(model, &target, offset).map_err(|e| format!("servo: goal: {e}"))?;
+    // Per mark, at the mark's own place in the plane (the model's bias is not uniform).
+    let g = &m.cfg.gripper;
+    let mut parallax_px = [0.0; 3];
+    for (p, mark) in parallax_px.iter_mut().zip(g.marks_m) {
+        let d = offset + a * (mark[0] - g.reference_m[0]) + Vector3::z() * (mark[1] - g.reference_m[1]);
+        *p = model.parallax_for_offset(&target, &d).map_err(|e| format!("servo: goal: {e}"))?;
+    }
+    Ok(ServoGoal { parallax_px, ..goal })
 }
 
 impl ServoPhase {
