@@ -7,7 +7,7 @@
 //!
 //! ```
 //! use handeye_daemon::worker::Worker;
-//! let worker = Worker::spawn("square", 1, |x: u64| x * x).unwrap();
+//! let mut worker = Worker::spawn("square", 1, |x: u64| x * x).unwrap();
 //! worker.try_submit(7).unwrap();
 //! let result = loop {
 //!     if let Some(r) = worker.try_result() { break r; }
