@@ -57,10 +57,10 @@ fn log(dir: &Path, name: &str) -> String {
 fn watch(tel: &mut MessageSubscriber<Telemetry>, timeout: Duration, mut until: impl FnMut(&Telemetry) -> bool) -> Option<Telemetry> {
     let t0 = Instant::now();
     while t0.elapsed() < timeout {
-        if let MessageEvent::Message(t) = tel.wait(Duration::from_millis(50)).unwrap() {
-            if until(&t) {
-                return Some(t);
-            }
+        if let MessageEvent::Message(t) = tel.wait(Duration::from_millis(50)).unwrap()
+            && until(&t)
+        {
+            return Some(t);
         }
     }
     None

@@ -259,58 +259,6 @@ fn otsu(hist: &[usize; 256]) -> u8 {
     best_t
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use handeye_vision::image::ImageBuf;
-    use handeye_vision::locate::{Blob, Placement};
-
-    #[test]
-    fn template_coordinates_of_the_default_plate() {
-        let p = PlateTemplate::new(&GripperModel::default());
-        // Reference at the centre; corners at (±½, ±½): a mark at (a, b) = (-0.016, 0.018)
-        // is left (s < 0) and up (t < 0, since e2 runs from the top-left corner down).
-        assert!(p.reference_st[0].abs() < 1e-12 && p.reference_st[1].abs() < 1e-12);
-        assert!((p.marks_st[0][0] + 0.016 / 0.042).abs() < 1e-9, "{:?}", p.marks_st);
-        assert!((p.marks_st[0][1] + 0.018 / 0.046).abs() < 1e-9, "{:?}", p.marks_st);
-        assert!((p.a_axis_st[0] - 1.0 / 0.042).abs() < 1e-9 && p.a_axis_st[1].abs() < 1e-12);
-        assert!((p.b_axis_st[1] + 1.0 / 0.046).abs() < 1e-9);
-    }
-
-    #[test]
-    fn finds_a_bordered_plate_above_the_moving_region() {
-        // Table grey 110; plate: dark border (10) around a light rectangle (170) at
-        // x 100..140, y 40..90; fingers (moving) below it at y 100..160.
-        let mut img = ImageBuf::filled(320, 240, 110);
-        for y in 32..98 {
-            for x in 92..148 {
-                img.set(x, y, 10);
-            }
-        }
-        for y in 40..90 {
-            for x in 100..140 {
-                img.set(x, y, 170);
-            }
-        }
-        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
-        let motion = Motion {
-            blobs: vec![blob],
-            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
-            threshold: 12,
-            noise_sigma: 1.0,
-            dropped: 0,
-        };
-        let c = find_plate(&img.view(), &motion).unwrap();
-        let want = [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]];
-        for (got, want) in c.iter().zip(want) {
-            assert!((got[0] - want[0]).abs() < 1e-9 && (got[1] - want[1]).abs() < 1e-9, "{c:?}");
-        }
-        // No plate: nothing enclosed above the fingers.
-        let blank = ImageBuf::filled(320, 240, 110);
-        assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
-    }
-}
-
 /// Corners of a polygon refined from the tracker's last edges: each inlier edge point is
 /// assigned to the nearest side of the tracked outline, a line is fitted to each side (total
 /// least squares), and adjacent lines are intersected. A template built from a clicked or
@@ -373,4 +321,56 @@ pub fn refine_polygon(t: &ContourTracker) -> Option<Vec<[f64; 2]>> {
         out.push([x.x, x.y]);
     }
     Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::locate::{Blob, Placement};
+
+    #[test]
+    fn template_coordinates_of_the_default_plate() {
+        let p = PlateTemplate::new(&GripperModel::default());
+        // Reference at the centre; corners at (±½, ±½): a mark at (a, b) = (-0.016, 0.018)
+        // is left (s < 0) and up (t < 0, since e2 runs from the top-left corner down).
+        assert!(p.reference_st[0].abs() < 1e-12 && p.reference_st[1].abs() < 1e-12);
+        assert!((p.marks_st[0][0] + 0.016 / 0.042).abs() < 1e-9, "{:?}", p.marks_st);
+        assert!((p.marks_st[0][1] + 0.018 / 0.046).abs() < 1e-9, "{:?}", p.marks_st);
+        assert!((p.a_axis_st[0] - 1.0 / 0.042).abs() < 1e-9 && p.a_axis_st[1].abs() < 1e-12);
+        assert!((p.b_axis_st[1] + 1.0 / 0.046).abs() < 1e-9);
+    }
+
+    #[test]
+    fn finds_a_bordered_plate_above_the_moving_region() {
+        // Table grey 110; plate: dark border (10) around a light rectangle (170) at
+        // x 100..140, y 40..90; fingers (moving) below it at y 100..160.
+        let mut img = ImageBuf::filled(320, 240, 110);
+        for y in 32..98 {
+            for x in 92..148 {
+                img.set(x, y, 10);
+            }
+        }
+        for y in 40..90 {
+            for x in 100..140 {
+                img.set(x, y, 170);
+            }
+        }
+        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
+        let motion = Motion {
+            blobs: vec![blob],
+            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
+            threshold: 12,
+            noise_sigma: 1.0,
+            dropped: 0,
+        };
+        let c = find_plate(&img.view(), &motion).unwrap();
+        let want = [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]];
+        for (got, want) in c.iter().zip(want) {
+            assert!((got[0] - want[0]).abs() < 1e-9 && (got[1] - want[1]).abs() < 1e-9, "{c:?}");
+        }
+        // No plate: nothing enclosed above the fingers.
+        let blank = ImageBuf::filled(320, 240, 110);
+        assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
+    }
 }

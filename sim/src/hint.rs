@@ -62,7 +62,9 @@ pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFa
     let (_, pose) = sim.block_pose(block);
     let cams = &sim.events.cameras;
     let world_corners: Vec<DVec3> = b.shape.corners.iter().map(|&c| pose.transform_point3(c)).collect();
-    let mut best: Option<(f64, usize, Vec<[f64; 2]>, Vec<[f64; 2]>, f64)> = None;
+    // (smaller-of-two image area, face, left polygon, right polygon, depth)
+    type Candidate = (f64, usize, Vec<[f64; 2]>, Vec<[f64; 2]>, f64);
+    let mut best: Option<Candidate> = None;
     for (fi, face) in b.shape.faces.iter().enumerate() {
         let n = pose.matrix3 * face.normal;
         if n.z.abs() > 20f64.to_radians().sin() {

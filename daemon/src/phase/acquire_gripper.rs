@@ -20,7 +20,7 @@ enum Stage {
     Open { still: u32 },
     Close { sent_frame: Option<u64>, still: u32 },
     /// Location running on the worker; the jaws reopen meanwhile.
-    Locating { submitted: Option<u64>, result: Option<JobResult> },
+    Locating { submitted: Option<u64>, result: Option<Box<JobResult>> },
     Converging { frames: u32 },
 }
 
@@ -92,12 +92,12 @@ impl AcquireGripper {
                     return Step::Stay(Cmd::HOLD);
                 }
                 if result.is_none() {
-                    *result = m.worker.try_result();
+                    *result = m.worker.try_result().map(Box::new);
                 }
                 if submitted.is_some_and(|f| c.frame_index < f + super::WORKER_DELAY_FRAMES) {
                     return Step::Stay(Cmd::HOLD);
                 }
-                match result.take() {
+                match result.take().map(|r| *r) {
                     None => Step::Stay(Cmd::HOLD),
                     Some(JobResult::Plate(Ok(plates))) => {
                         for (view, corners) in [View::Left, View::Right].into_iter().zip(plates) {

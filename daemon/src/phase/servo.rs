@@ -142,7 +142,7 @@ impl ServoPhase {
         let d1 = model.reconstruct_direction(&StereoPoint { left: target.left.e1, right: target.right.e1 });
         let d2 = model.reconstruct_direction(&StereoPoint { left: target.left.e2, right: target.right.e2 });
         let mut n = d1.cross(&d2);
-        if !(n.norm() > 1e-12) {
+        if n.norm().is_nan() || n.norm() <= 1e-12 {
             return Err("servo: the target facet reconstructs as a line".into());
         }
         n /= n.norm();
