@@ -3,10 +3,10 @@
 //! moments only and encoded on a separate thread ([`ReportWriter`]), never in the hard loop.
 //!
 //! Overlay colours: gripper plate trackers green, target trackers red (yellow when lost).
-//! The servo plot shows `log10 |e_i|` per step for the six error components (three mark
-//! parallaxes in blue shades, `s`, `t` in orange/red, `ρ` in grey), 1 px at the bottom edge
-//! up to 1000 at the top (`ρ` in milliradians; below 1 sits on the bottom edge); a falling
-//! bundle of lines is convergence.
+//! The servo plot shows `log10 |e_i|` per step for the six error components: the three mark
+//! parallaxes in pixels (blue shades), `s` and `t` in percent of the facet (orange, red) and
+//! `ρ` in milliradians (grey), from 0.01 at the bottom edge to 100 at the top, one grid line
+//! per decade (values below 0.01 sit on the bottom edge); a falling bundle is convergence.
 
 use std::path::{Path, PathBuf};
 
@@ -160,17 +160,21 @@ pub fn servo_plot(rows: &[ServoTraceRow]) -> RgbImage {
     let grey = Rgb([160, 160, 160]);
     draw_line(&mut img, [x0, y0], [x1, y0], Rgb([0, 0, 0]));
     draw_line(&mut img, [x0, y0], [x0, y1], Rgb([0, 0, 0]));
-    // Decades: 1, 10, 100, 1000 (px, or mrad for ρ).
-    for d in 0..=3 {
-        let y = y0 + (y1 - y0) * d as f64 / 3.0;
+    // Decades 0.01 .. 100.
+    for d in 0..=4 {
+        let y = y0 + (y1 - y0) * d as f64 / 4.0;
         draw_line(&mut img, [x0 - 5.0, y], [x1, y], if d == 0 { Rgb([0, 0, 0]) } else { Rgb([225, 225, 225]) });
     }
     let n = rows.len().max(2) as f64 - 1.0;
     let colours = [Rgb([20, 60, 200]), Rgb([60, 120, 230]), Rgb([120, 170, 250]), Rgb([240, 140, 20]), Rgb([200, 30, 30]), grey];
     let to_xy = |i: usize, v: f64, k: usize| {
-        let v = if k == 5 { v * 1000.0 } else { v };
-        let l = v.abs().max(1e-3).log10().clamp(0.0, 3.2);
-        [x0 + (x1 - x0) * i as f64 / n, y0 + (y1 - y0) * l / 3.0]
+        let v = match k {
+            3 | 4 => v * 100.0,
+            5 => v * 1000.0,
+            _ => v,
+        };
+        let l = v.abs().max(1e-6).log10().clamp(-2.0, 2.2) + 2.0;
+        [x0 + (x1 - x0) * i as f64 / n, y0 + (y1 - y0) * l / 4.0]
     };
     for (i, r) in rows.iter().enumerate() {
         let x = x0 + (x1 - x0) * i as f64 / n;
@@ -213,10 +217,11 @@ mod tests {
             .map(|i| ServoTraceRow { step: i, frame: 0, error: [100.0 / 2f64.powi(i as i32), f64::NAN, f64::NAN, f64::NAN, f64::NAN, f64::NAN], offset_m: 0.0, offset_yaw_rad: 0.0 })
             .collect();
         let img = servo_plot(&rows);
-        // The first parallax line starts high (100 px: two decades up) and ends low.
+        // The first parallax line starts at 100 px (the top decade line, y = 30) and ends at
+        // 0.2 px (between the 0.1 and 1 lines: y = 330 - 75 * 1.3 = 232).
         let column_has_blue = |x: u32, ys: std::ops::Range<u32>| ys.into_iter().any(|y| *img.get_pixel(x, y) == Rgb([20, 60, 200]));
-        assert!(column_has_blue(31, 100..140), "start near 100 px");
-        assert!(!column_has_blue(31, 250..330));
-        assert!(column_has_blue(608, 320..331), "end at or below 1 px, on the bottom edge");
+        assert!(column_has_blue(31, 28..40), "start at 100 px");
+        assert!(!column_has_blue(31, 150..330));
+        assert!(column_has_blue(608, 222..242), "end at 0.2 px");
     }
 }

@@ -9,7 +9,8 @@
 //! - `final_angle_error_deg`: angle between the gripper plate's normal (the jaws' closing
 //!   axis) and the target facet's normal.
 //!
-//! When the jaws have closed (phase `lift` after `grasp`) it measures the grasp itself:
+//! When the jaws start to close (the daemon's reason says `grasp: closing`; else at phase
+//! `lift`) it measures the grasp itself:
 //! `grasp_plane_error_mm`, the distance of the **jaw-centre plane** (through the tool point,
 //! normal to the closing axis) from the block's mid-plane parallel to the facet (halfway
 //! between the facet and the face opposite it), and the tool point's lateral offset from
@@ -49,7 +50,7 @@ pub struct DaemonWatch {
     /// First frame on which each phase was reported, by name, in order of appearance.
     pub phases: Vec<(String, u64)>,
     pub converged: Option<ConvergedPlacement>,
-    /// The placement when the jaws had closed (phase `lift` first reported).
+    /// The placement when the jaws started closing.
     pub grasped: Option<ConvergedPlacement>,
     /// First frame with phase `stopped` or `failed`, and the reason the daemon gave.
     pub stopped_frame: Option<u64>,
@@ -123,6 +124,11 @@ impl DaemonWatch {
                 self.stop_reason = Some(t.reason_text());
             }
             self.last_phase = Some(t.phase);
+        }
+        // The jaws are about to close (the daemon says so in its reason): where they are now
+        // is the grasp (once closed, the jaws centre the block and hide any error).
+        if phase == Phase::Grasp && self.grasped.is_none() && t.reason_text().starts_with("grasp: closing") {
+            self.grasped = self.placement(sim, frame);
         }
     }
 
