@@ -131,6 +131,13 @@ fn one_sided_search_with_learnt_polarity_tracks_the_same_sequence() {
 }
 
 #[test]
+fn skipping_needless_refinement_passes_keeps_the_accuracy_on_smooth_motion() {
+    let config = TrackerConfig { refine_skip_px: 1.0, ..TrackerConfig::default() };
+    let (rms, worst) = track_sequence(config);
+    assert!(rms < 0.5, "corner RMS {rms:.3} px (worst frame {worst:.3} px)");
+}
+
+#[test]
 fn a_jump_beyond_the_search_range_ends_lost_not_locked_elsewhere() {
     let config = TrackerConfig::default();
     // Several jump directions: the clutter differs around each landing place.

@@ -4,7 +4,7 @@
 //! corners must stay within 4 px of ground truth annotated by eye on frames spread over the
 //! sequence. Skips (with a message) when the data set is absent.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, TrackState, TrackerConfig};
@@ -15,7 +15,7 @@ fn data_dir() -> Option<PathBuf> {
     dir.join("image0000.png").is_file().then_some(dir)
 }
 
-fn load(dir: &PathBuf, k: usize) -> ImageBuf {
+fn load(dir: &Path, k: usize) -> ImageBuf {
     let path = dir.join(format!("image{k:04}.png"));
     let img = image::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_luma8();
     let (w, h) = (img.width() as usize, img.height() as usize);

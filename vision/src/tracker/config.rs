@@ -39,6 +39,8 @@ pub struct TrackerConfig {
     pub passes: usize,
     /// Half-length of the refinement passes' search, pixels.
     pub refine_search_px: f64,
+    /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
+    pub refine_skip_px: f64,
     /// Edge polarity rule.
     pub edge_sign: EdgeSign,
     /// Weakest gradient accepted as an edge: central difference `I(k+1) − I(k−1)` in grey
@@ -111,6 +113,7 @@ impl Default for TrackerConfig {
             search_px: 10.0,
             passes: 2,
             refine_search_px: 4.0,
+            refine_skip_px: 0.0,
             edge_sign: EdgeSign::Either,
             min_contrast: 12,
             model: DeformationModel::Projective,
@@ -183,6 +186,7 @@ impl TrackerConfig {
         check(unit(self.min_inlier_ratio_to_recent), "min_inlier_ratio_to_recent", self.min_inlier_ratio_to_recent, "0..=1")?;
         check(self.max_squash >= 1.0, "max_squash", self.max_squash, ">= 1")?;
         check(self.max_area_change >= 1.0, "max_area_change", self.max_area_change, ">= 1")?;
+        check(self.refine_skip_px >= 0.0 && self.refine_skip_px.is_finite(), "refine_skip_px", self.refine_skip_px, ">= 0 px")?;
         check(unit(self.velocity_gain), "velocity_gain", self.velocity_gain, "0..=1")?;
         check(unit(self.deformation_velocity_gain), "deformation_velocity_gain", self.deformation_velocity_gain, "0..=1")?;
         check(self.max_predicted_step_px >= 0.0, "max_predicted_step_px", self.max_predicted_step_px, ">= 0 px")?;

@@ -205,17 +205,25 @@ impl ContourTracker {
                 sigma_max_px: self.config.sigma_max_px.min(search_px),
                 deformation_ridge: self.config.deformation_ridge,
                 perspective_ridge: self.config.perspective_ridge,
-
             };
             let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides, edges: &self.edges };
             let fit = fit_motion(&points, &settings, &mut self.fit);
-            match current.moved(fit.t, fit.a, fit.g, current.frame.origin) {
-                Some(moved) => current = moved,
-                None => {
-                    self.state = TrackState::Lost(LostReason::NotFinite);
-                    self.updates += 1;
-                    return self.state;
-                }
+            let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
+                self.state = TrackState::Lost(LostReason::NotFinite);
+                self.updates += 1;
+                return self.state;
+            };
+            // A pass that barely moved any corner would be searched again at the same places:
+            // skip the remaining passes.
+            let moved_px = self
+                .template
+                .corners()
+                .iter()
+                .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
+                .fold(0.0, f64::max);
+            current = moved;
+            if moved_px < self.config.refine_skip_px {
+                break;
             }
         }
         let verdict = self.judge(&current);
