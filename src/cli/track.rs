@@ -13,26 +13,30 @@ use handeye_vision::tracker::{
 };
 use serde_json::{json, Value};
 
-/// Track one polygon through an image sequence.
-///
-/// The folder's PNG files are read in file-name order (other files are skipped). The tracker
-/// starts from the polygon named `--face` in the `--init` JSON, placed on the first frame, and
-/// prints one line per frame: corners, confidence and state. A lost tracker stays lost (its
-/// last good corners are printed) and the reason is given.
-///
-/// Defaults are the library's: 100 points, two-sided search with each point's learnt inside
-/// grey level as a tie-breaker, a robust projective fit (A.2 plus perspective), and a
-/// refinement pass. The first frame may be off by a few pixels; the tracker pulls it in.
-///
-/// The init JSON looks like `{"faces": {"top": [[315, 234], [385, 205], ...], ...}}`: corners
-/// in pixels (u right, v down), in order around each polygon, at least 3.
-///
-/// Example:
-///
-///   handeye track --dir ../shared/data/visp-cube --init ../shared/data/visp-cube/faces-frame0.json \
-///       --face top --one-sided --overlay /tmp/top
+/// Shown after the options in `--help` (the subcommand's one-line summary lives in main.rs).
+const TRACK_HELP: &str = "\
+The folder's PNG files are read in file-name order (other files are skipped). The tracker
+starts from the polygon named `--face` in the `--init` JSON, placed on the first frame, and
+prints one line per frame: corners, confidence and state. A lost tracker stays lost (its
+last good corners are printed) and the reason is given.
+
+Defaults are the library's: 100 points, two-sided search with each point's learnt inside
+grey level as a tie-breaker, a robust projective fit (A.2 plus perspective), and a
+refinement pass. The first frame may be off by a few pixels; the tracker pulls it in.
+
+The init JSON looks like `{\"faces\": {\"top\": [[315, 234], [385, 205], ...], ...}}`: corners
+in pixels (u right, v down), in order around each polygon, at least 3.
+
+Example:
+
+  handeye track --dir ../shared/data/visp-cube --init ../shared/data/visp-cube/faces-frame0.json \\
+      --face top --overlay /tmp/top
+  handeye track --dir ../shared/data/visp-cube --init ../shared/data/visp-cube/faces-frame0.json \\
+      --face left --json > left.jsonl";
+
+/// Arguments of `handeye track`.
 #[derive(Args, Debug)]
-#[command(verbatim_doc_comment)]
+#[command(after_help = TRACK_HELP)]
 pub struct TrackArgs {
     /// Folder of frames (PNG, 8-bit grey or colour; colour is converted to grey).
     #[arg(long, value_name = "DIR")]

@@ -12,20 +12,24 @@ use serde_json::json;
 
 use crate::cli::track::{face_corners, list_frames, load_faces, load_gray};
 
-/// Time the affine contour tracker on a real image sequence.
-///
-/// Contour update: one tracker (default settings: 100 points, ±10 px search plus a ±4 px
-/// refinement pass) follows `--face` through every frame, `--repeats` times. Stereo update:
-/// a gripper and a target contour in a left and a right view (4 contours) updated in one call,
-/// with frame k as the left view and frame k+1 as the right one (the faces `--face` and
-/// `--target-face`). Prints the median and 99th percentile of the time per update and the
-/// stereo rate it allows. Build with `--release` for numbers worth recording.
-///
-/// Example:
-///
-///   cargo run --release -- bench tracker --dir ../shared/data/visp-cube --json
+/// Shown after the options in `--help`.
+const BENCH_HELP: &str = "\
+Time the affine contour tracker on a real image sequence.
+
+Contour update: one tracker (default settings: 100 points, ±10 px search plus a ±4 px
+refinement pass) follows `--face` through every frame, `--repeats` times. Stereo update:
+a gripper and a target contour in a left and a right view (4 contours) updated in one call,
+with frame k as the left view and frame k+1 as the right one (the faces `--face` and
+`--target-face`). Prints the median and 99th percentile of the time per update and the
+stereo rate it allows. Build with `--release` for numbers worth recording.
+
+Example:
+
+  cargo run --release -- bench tracker --dir ../shared/data/visp-cube --json";
+
+/// Arguments of `handeye bench tracker`.
 #[derive(Args, Debug)]
-#[command(verbatim_doc_comment)]
+#[command(after_help = BENCH_HELP)]
 pub struct TrackerArgs {
     /// Folder of frames (PNG), read in file-name order.
     #[arg(long, value_name = "DIR", default_value = "../shared/data/visp-cube")]
