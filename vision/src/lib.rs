@@ -7,3 +7,4 @@ pub mod image;
 pub mod locate;
 pub mod pointing;
 pub mod servo;
+pub mod tracker;

@@ -1,0 +1,209 @@
+//! Tracker settings.
+
+use thiserror::Error;
+
+use super::fit::{DeformationModel, RobustLoss};
+use super::search::{Polarity, MAX_SEARCH_PX};
+
+/// How each sampling point decides which edge sign it accepts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EdgeSign {
+    /// Two-sided: any sign.
+    #[default]
+    Either,
+    /// One-sided with one given polarity for the whole contour.
+    Fixed(Polarity),
+    /// One-sided with a polarity per point, learnt from the edges the point locks on to
+    /// during the first updates (two-sided until then). A face boundary often changes sign
+    /// along its length (printed texture, shading, background), which a single polarity
+    /// cannot express. Beware: where a side stops being a silhouette (a neighbouring face
+    /// comes into view, an occluder passes) its true polarity flips, and a learnt one-sided
+    /// point then prefers the wrong edge; the default two-sided search with the appearance
+    /// cue ([`TrackerConfig::appearance_px_per_grey`]) handles that case better.
+    Learned,
+}
+
+/// Everything that tunes a [`ContourTracker`](super::ContourTracker). `Default` is the
+/// setting that tracks the real `visp-cube` sequence; each field says what it trades.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerConfig {
+    /// Sampling points around the contour (the thesis uses about 100).
+    pub points: usize,
+    /// Fraction of each side kept free of points at both ends: near a corner the normal
+    /// search would find the neighbouring side.
+    pub corner_margin: f64,
+    /// Half-length of the normal search of the first pass, pixels along the normal (<= 40).
+    pub search_px: f64,
+    /// Search passes per update: after the first pass the contour is moved and searched again
+    /// with `refine_search_px`, which recovers the deformation a single step leaves behind.
+    pub passes: usize,
+    /// Half-length of the refinement passes' search, pixels.
+    pub refine_search_px: f64,
+    /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
+    pub refine_skip_px: f64,
+    /// Edge polarity rule.
+    pub edge_sign: EdgeSign,
+    /// Weakest gradient accepted as an edge: central difference `I(k+1) − I(k−1)` in grey
+    /// levels (a clean step of 10 grey levels scores 10).
+    pub min_contrast: i32,
+    /// Deformation estimator (A.2 or A.3).
+    pub model: DeformationModel,
+    /// Robust weight function of the fit.
+    pub loss: RobustLoss,
+    /// Reweighting iterations of the first pass.
+    pub iterations: usize,
+    /// Reweighting iterations of each refinement pass (it starts close to the answer).
+    pub refine_iterations: usize,
+    /// Bounds of the robust scale, px.
+    pub sigma_min_px: f64,
+    pub sigma_max_px: f64,
+    /// Ridge on the deformation (relative): damps deformation the edges do not constrain.
+    pub deformation_ridge: f64,
+    /// Ridge on the perspective term of the projective model (relative): perspective changes
+    /// slowly on real objects, and unchecked it lets one side swing away on its own.
+    pub perspective_ridge: f64,
+    /// A point is an inlier when its chosen edge is within this distance of the fit, px.
+    pub inlier_px: f64,
+    /// Lost when more than this share of the search lines leave the image.
+    pub max_outside_fraction: f64,
+    /// Lost when fewer than this share of the points find any edge.
+    pub min_edge_fraction: f64,
+    /// Lost when fewer than this share of the points are inliers.
+    pub min_inlier_fraction: f64,
+    /// Lost when the inliers pin the contour down this little in some direction (see
+    /// [`Confidence::direction_support`](super::Confidence::direction_support); 1 at best).
+    pub min_direction_support: f64,
+    /// Lost when the inlier share falls below this fraction of its recent average in one
+    /// update (the real `visp-cube` faces never drop below 0.9 of it).
+    pub min_inlier_ratio_to_recent: f64,
+    /// Lost when the inliers' RMS residual exceeds this, px.
+    pub max_residual_px: f64,
+    /// Lost when the contour is squashed (ratio of the singular values of the deformation
+    /// since initialisation) beyond this.
+    pub max_squash: f64,
+    /// Lost when the area changes by more than this factor since initialisation.
+    pub max_area_change: f64,
+    /// Velocity gain of the predictive filter for the origin (0 = no prediction).
+    pub velocity_gain: f64,
+    /// Velocity gain for the basis vectors.
+    pub deformation_velocity_gain: f64,
+    /// Largest predicted step of the origin per update, px.
+    pub max_predicted_step_px: f64,
+    /// Rate at which a point's reference contrast follows what it sees (0..1).
+    pub contrast_learning_rate: f64,
+    /// Appearance cue: each point learns the grey level just inside its edge (the tracked
+    /// surface, which moves with the contour). A candidate whose inside differs from it by
+    /// more than `appearance_tolerance` grey levels costs this many px per extra grey level
+    /// when the fit chooses among a point's candidates. It tells a face's own edge from the
+    /// silhouette of a neighbouring face appearing beside it. 0 disables.
+    pub appearance_px_per_grey: f64,
+    /// Grey-level difference the appearance cue tolerates for free.
+    pub appearance_tolerance: f64,
+    /// Rate at which a point's inside grey level follows what it sees (0..1), from edges
+    /// within the tolerance only: slow, so lighting can drift but a neighbouring face creeping
+    /// in beside the edge cannot.
+    pub appearance_learning_rate: f64,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            points: 100,
+            corner_margin: 0.06,
+            search_px: 10.0,
+            passes: 2,
+            refine_search_px: 4.0,
+            refine_skip_px: 0.0,
+            edge_sign: EdgeSign::Either,
+            min_contrast: 12,
+            model: DeformationModel::Projective,
+            loss: RobustLoss::Tukey,
+            iterations: 4,
+            refine_iterations: 2,
+            sigma_min_px: 0.4,
+            sigma_max_px: 3.0,
+            deformation_ridge: 1e-3,
+            perspective_ridge: 4.0,
+            inlier_px: 2.0,
+            max_outside_fraction: 0.5,
+            min_edge_fraction: 0.3,
+            min_inlier_fraction: 0.3,
+            max_residual_px: 1.2,
+            min_direction_support: 0.35,
+            min_inlier_ratio_to_recent: 0.65,
+            max_squash: 8.0,
+            max_area_change: 25.0,
+            velocity_gain: 0.5,
+            deformation_velocity_gain: 0.3,
+            max_predicted_step_px: 20.0,
+            contrast_learning_rate: 0.2,
+            appearance_px_per_grey: 0.6,
+            appearance_tolerance: 10.0,
+            appearance_learning_rate: 0.05,
+        }
+    }
+}
+
+/// A setting outside its valid range.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("tracker setting `{field}` = {value} is invalid: {expected}")]
+pub struct ConfigError {
+    pub field: &'static str,
+    pub value: f64,
+    pub expected: &'static str,
+}
+
+impl TrackerConfig {
+    /// Checks every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let check = |ok: bool, field: &'static str, value: f64, expected: &'static str| {
+            if ok { Ok(()) } else { Err(ConfigError { field, value, expected }) }
+        };
+        let unit = |v: f64| (0.0..=1.0).contains(&v);
+        check(self.points >= super::contour::MIN_POINTS && self.points <= 4096, "points", self.points as f64, "12..=4096")?;
+        check((0.0..0.45).contains(&self.corner_margin), "corner_margin", self.corner_margin, "0 <= x < 0.45")?;
+        check(self.search_px >= 1.0 && self.search_px <= MAX_SEARCH_PX, "search_px", self.search_px, "1..=40 px")?;
+        check((1..=8).contains(&self.passes), "passes", self.passes as f64, "1..=8")?;
+        check(
+            self.refine_search_px >= 1.0 && self.refine_search_px <= MAX_SEARCH_PX,
+            "refine_search_px",
+            self.refine_search_px,
+            "1..=40 px",
+        )?;
+        check((1..=255).contains(&self.min_contrast), "min_contrast", self.min_contrast as f64, "1..=255")?;
+        check((1..=50).contains(&self.iterations), "iterations", self.iterations as f64, "1..=50")?;
+        check((1..=50).contains(&self.refine_iterations), "refine_iterations", self.refine_iterations as f64, "1..=50")?;
+        check(self.sigma_min_px > 0.0 && self.sigma_min_px <= self.sigma_max_px, "sigma_min_px", self.sigma_min_px, "0 < x <= sigma_max_px")?;
+        check(self.sigma_max_px.is_finite(), "sigma_max_px", self.sigma_max_px, "finite")?;
+        check(self.deformation_ridge >= 0.0 && self.deformation_ridge.is_finite(), "deformation_ridge", self.deformation_ridge, ">= 0")?;
+        check(self.perspective_ridge >= 0.0 && self.perspective_ridge.is_finite(), "perspective_ridge", self.perspective_ridge, ">= 0")?;
+        check(self.inlier_px > 0.0 && self.inlier_px.is_finite(), "inlier_px", self.inlier_px, "> 0 px")?;
+        check(unit(self.max_outside_fraction), "max_outside_fraction", self.max_outside_fraction, "0..=1")?;
+        check(unit(self.min_edge_fraction), "min_edge_fraction", self.min_edge_fraction, "0..=1")?;
+        check(unit(self.min_inlier_fraction), "min_inlier_fraction", self.min_inlier_fraction, "0..=1")?;
+        check(self.max_residual_px > 0.0, "max_residual_px", self.max_residual_px, "> 0 px")?;
+        check(unit(self.min_direction_support), "min_direction_support", self.min_direction_support, "0..=1")?;
+        check(unit(self.min_inlier_ratio_to_recent), "min_inlier_ratio_to_recent", self.min_inlier_ratio_to_recent, "0..=1")?;
+        check(self.max_squash >= 1.0, "max_squash", self.max_squash, ">= 1")?;
+        check(self.max_area_change >= 1.0, "max_area_change", self.max_area_change, ">= 1")?;
+        check(self.refine_skip_px >= 0.0 && self.refine_skip_px.is_finite(), "refine_skip_px", self.refine_skip_px, ">= 0 px")?;
+        check(unit(self.velocity_gain), "velocity_gain", self.velocity_gain, "0..=1")?;
+        check(unit(self.deformation_velocity_gain), "deformation_velocity_gain", self.deformation_velocity_gain, "0..=1")?;
+        check(self.max_predicted_step_px >= 0.0, "max_predicted_step_px", self.max_predicted_step_px, ">= 0 px")?;
+        check(unit(self.contrast_learning_rate), "contrast_learning_rate", self.contrast_learning_rate, "0..=1")?;
+        check(
+            self.appearance_px_per_grey >= 0.0 && self.appearance_px_per_grey.is_finite(),
+            "appearance_px_per_grey",
+            self.appearance_px_per_grey,
+            ">= 0",
+        )?;
+        check(unit(self.appearance_learning_rate), "appearance_learning_rate", self.appearance_learning_rate, "0..=1")?;
+        check(
+            self.appearance_tolerance >= 0.0 && self.appearance_tolerance.is_finite(),
+            "appearance_tolerance",
+            self.appearance_tolerance,
+            ">= 0 grey levels",
+        )?;
+        Ok(())
+    }
+}

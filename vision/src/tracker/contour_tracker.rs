@@ -1,0 +1,524 @@
+//! One affine template active contour: predict, search, fit, check, learn.
+
+use nalgebra::{Matrix2, Vector2};
+
+use super::config::{ConfigError, EdgeSign, TrackerConfig};
+use super::contour::{Template, TemplateError};
+use super::filter::PredictiveFilter;
+use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
+use super::frame::{AffineFrame, Placement};
+use super::search::{search_point, Candidate, PointEdges, SideGeometry};
+use super::state::{Confidence, LostReason, TrackState};
+use crate::image::ImageView;
+
+/// Why a tracker could not be built or re-initialised.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrackerError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Template(#[from] TemplateError),
+}
+
+/// One point's search in the last pass.
+#[derive(Debug, Clone, Copy)]
+pub struct SearchLine<'a> {
+    /// Where the point was placed, image px.
+    pub point: Vector2<f64>,
+    /// Outward unit normal searched along.
+    pub normal: Vector2<f64>,
+    /// Edges found, strongest first (offsets along `normal`).
+    pub candidates: &'a [Candidate],
+    /// Index of the candidate the fit used.
+    pub chosen: Option<usize>,
+    /// Distance of the chosen candidate from the fitted contour, px.
+    pub residual_px: f64,
+    /// The search line left the image.
+    pub outside: bool,
+}
+
+/// An affine template active contour (Appendix A of the thesis, made robust).
+///
+/// All buffers are sized at construction; [`update`](Self::update) allocates nothing.
+///
+/// ```
+/// use handeye_vision::image::ImageBuf;
+/// use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+/// // A dark square on a bright background, and a tracker started 2 px off.
+/// let mut img = ImageBuf::filled(160, 120, 200);
+/// for y in 40..80 { for x in 60..100 { img.set(x, y, 50); } }
+/// let mut tracker = ContourTracker::new(TrackerConfig::default(),
+///     &[[62.0, 41.0], [101.5, 41.0], [101.5, 81.0], [62.0, 81.0]]).unwrap();
+/// let state = tracker.update(&img.view(), 1.0 / 30.0);
+/// assert!(state.is_tracking());
+/// // Pixel (x, y) covers x-0.5..x+0.5, so the square's boundary runs at 39.5 and 79.5.
+/// let c = tracker.corners().next().unwrap();
+/// assert!((c.x - 59.5).abs() < 0.3 && (c.y - 39.5).abs() < 0.3, "{c:?}");
+/// ```
+#[derive(Debug, Clone)]
+pub struct ContourTracker {
+    config: TrackerConfig,
+    template: Template,
+    placement: Placement,
+    /// Basis at initialisation, inverted: `[e1 e2] · initial⁻¹` is the deformation so far.
+    initial_basis_inv: Matrix2<f64>,
+    initial_det: f64,
+    filter: PredictiveFilter,
+    state: TrackState,
+    confidence: Confidence,
+    /// Running average of the inlier share over recent good updates.
+    recent_inliers: f64,
+    updates: u64,
+    // Per-side search geometry of the current pass, and the same sides for the fit.
+    sides: Vec<SideGeometry>,
+    fit_sides: Vec<FitSide>,
+    // Per-point data of the current pass (structure of arrays, sized at construction).
+    pos_x: Vec<f64>,
+    pos_y: Vec<f64>,
+    rel_x: Vec<f64>,
+    rel_y: Vec<f64>,
+    nrm_x: Vec<f64>,
+    nrm_y: Vec<f64>,
+    edges: Vec<PointEdges>,
+    /// Learnt signed outward contrast per point (0 = not learnt yet).
+    ref_contrast: Vec<f32>,
+    /// Learnt grey level just inside each point's edge (negative = not learnt yet).
+    ref_inside: Vec<f32>,
+    fit: FitBuffers,
+}
+
+impl ContourTracker {
+    /// A tracker for the polygon `corners_px` (image pixels, in order around it, >= 3).
+    pub fn new(config: TrackerConfig, corners_px: &[[f64; 2]]) -> Result<Self, TrackerError> {
+        config.validate()?;
+        let (template, frame) = Template::from_polygon_px(corners_px, config.points, config.corner_margin)?;
+        Ok(Self::with_template(config, template, frame))
+    }
+
+    /// A tracker for a template built in its own coordinates (e.g. the gripper's face with its
+    /// marks), placed at `frame`.
+    pub fn from_template(config: TrackerConfig, template: Template, frame: AffineFrame) -> Result<Self, TrackerError> {
+        config.validate()?;
+        if template.points().len() < super::contour::MIN_POINTS {
+            return Err(TemplateError::TooFewPoints { min: super::contour::MIN_POINTS, got: template.points().len() }.into());
+        }
+        if !frame.is_finite() || frame.det() == 0.0 {
+            return Err(TemplateError::Degenerate("the initial frame is singular").into());
+        }
+        Ok(Self::with_template(config, template, frame))
+    }
+
+    fn with_template(config: TrackerConfig, template: Template, frame: AffineFrame) -> Self {
+        let n = template.points().len().max(config.points);
+        let sides = template.sides();
+        let mut tracker = Self {
+            filter: PredictiveFilter::new(
+                config.velocity_gain,
+                config.deformation_velocity_gain,
+                config.max_predicted_step_px,
+            ),
+            config,
+            template,
+            placement: Placement::affine(frame),
+            initial_basis_inv: Matrix2::identity(),
+            initial_det: 1.0,
+            state: TrackState::Tracking,
+            confidence: Confidence::default(),
+            recent_inliers: 0.0,
+            updates: 0,
+            sides: Vec::with_capacity(sides.max(8)),
+            fit_sides: Vec::with_capacity(sides.max(8)),
+            pos_x: Vec::with_capacity(n),
+            pos_y: Vec::with_capacity(n),
+            rel_x: Vec::with_capacity(n),
+            rel_y: Vec::with_capacity(n),
+            nrm_x: Vec::with_capacity(n),
+            nrm_y: Vec::with_capacity(n),
+            edges: Vec::with_capacity(n),
+            ref_contrast: Vec::with_capacity(n),
+            ref_inside: Vec::with_capacity(n),
+            fit: FitBuffers::with_capacity(n),
+        };
+        tracker.restart(frame);
+        tracker
+    }
+
+    /// Resets state, learning and velocity and places the template at `frame`.
+    fn restart(&mut self, frame: AffineFrame) {
+        let n = self.template.points().len();
+        self.placement = Placement::affine(frame);
+        self.initial_basis_inv = frame.basis().try_inverse().unwrap_or_else(Matrix2::identity);
+        self.initial_det = frame.det();
+        self.filter.reset();
+        self.state = TrackState::Tracking;
+        self.confidence = Confidence::default();
+        self.recent_inliers = 0.0;
+        self.updates = 0;
+        for v in [&mut self.pos_x, &mut self.pos_y, &mut self.rel_x, &mut self.rel_y, &mut self.nrm_x, &mut self.nrm_y] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        self.edges.clear();
+        self.edges.resize(n, PointEdges::default());
+        self.ref_contrast.clear();
+        self.ref_contrast.resize(n, 0.0);
+        self.ref_inside.clear();
+        self.ref_inside.resize(n, -1.0);
+        self.fit.resize(n);
+    }
+
+    /// Re-initialises from a new polygon (image pixels): a new template, fresh state. Does not
+    /// allocate when the polygon has no more corners than the first one.
+    pub fn reinit(&mut self, corners_px: &[[f64; 2]]) -> Result<(), TemplateError> {
+        let frame = self.template.rebuild_from_polygon_px(corners_px, self.config.points, self.config.corner_margin)?;
+        self.restart(frame);
+        Ok(())
+    }
+
+    /// Re-initialises the same template at another frame (e.g. handed over from the planner).
+    pub fn reinit_at(&mut self, frame: AffineFrame) -> Result<(), TemplateError> {
+        if !frame.is_finite() || frame.det() == 0.0 {
+            return Err(TemplateError::Degenerate("the frame is singular"));
+        }
+        self.restart(frame);
+        Ok(())
+    }
+
+    /// One tracking step on `image`, `dt_s` seconds after the previous one (the real time
+    /// between the frames; non-finite or negative counts as 0). A lost tracker stays lost and
+    /// this returns at once.
+    pub fn update(&mut self, image: &ImageView<'_>, dt_s: f64) -> TrackState {
+        if !self.state.is_tracking() {
+            return self.state;
+        }
+        let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
+        let predicted = self.filter.predict(&self.placement, dt_s);
+        let mut current = predicted;
+        for pass in 0..self.config.passes {
+            let search_px = if pass == 0 { self.config.search_px } else { self.config.refine_search_px };
+            self.search(image, &current, search_px);
+            let settings = FitSettings {
+                model: self.config.model,
+                loss: self.config.loss,
+                iterations: if pass == 0 { self.config.iterations } else { self.config.refine_iterations },
+                sigma_min_px: self.config.sigma_min_px,
+                sigma_max_px: self.config.sigma_max_px.min(search_px),
+                deformation_ridge: self.config.deformation_ridge,
+                perspective_ridge: self.config.perspective_ridge,
+            };
+            let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides, edges: &self.edges };
+            let fit = fit_motion(&points, &settings, &mut self.fit);
+            let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
+                self.state = TrackState::Lost(LostReason::NotFinite);
+                self.updates += 1;
+                return self.state;
+            };
+            // A pass that barely moved any corner would be searched again at the same places:
+            // skip the remaining passes.
+            let moved_px = self
+                .template
+                .corners()
+                .iter()
+                .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
+                .fold(0.0, f64::max);
+            current = moved;
+            if moved_px < self.config.refine_skip_px {
+                break;
+            }
+        }
+        let verdict = self.judge(&current);
+        self.state = match verdict {
+            Some(reason) => TrackState::Lost(reason),
+            None => {
+                if self.updates > 0 {
+                    self.filter.correct(&predicted, &current, dt_s);
+                }
+                self.placement = current;
+                self.learn();
+                let f = self.confidence.inlier_fraction;
+                self.recent_inliers = if self.updates == 0 { f } else { self.recent_inliers + 0.2 * (f - self.recent_inliers) };
+                TrackState::Tracking
+            }
+        };
+        self.updates += 1;
+        self.state
+    }
+
+    /// Places the points for `placement` and searches every normal.
+    fn search(&mut self, image: &ImageView<'_>, placement: &Placement, search_px: f64) {
+        let frame = &placement.frame;
+        let orient = self.template.orientation * frame.det().signum();
+        self.sides.clear();
+        self.fit_sides.clear();
+        let fixed_sign = match self.config.edge_sign {
+            EdgeSign::Either => Some(0),
+            EdgeSign::Fixed(p) => Some(p.outward_sign()),
+            EdgeSign::Learned => None,
+        };
+        for edge in &self.template.edges {
+            // A side stays straight under the placement; its image direction is that of its
+            // end points (the tangent pushed through the map's derivative in the affine case).
+            let tau = if placement.perspective == Vector2::zeros() {
+                frame.e1 * edge.tangent.x + frame.e2 * edge.tangent.y
+            } else {
+                placement.image_from_template(edge.start + edge.tangent)
+                    - placement.image_from_template(edge.start)
+            };
+            let len = tau.norm();
+            // Outward normal: right of the tangent for a positively oriented polygon.
+            let normal = if len > 0.0 { [orient * tau.y / len, -orient * tau.x / len] } else { [1.0, 0.0] };
+            let side = SideGeometry::new(normal, search_px);
+            self.sides.push(side);
+            let start = placement.image_from_template(edge.start) - frame.origin;
+            self.fit_sides.push(FitSide {
+                first: edge.first,
+                count: edge.count,
+                normal: Vector2::new(normal[0], normal[1]),
+                np: normal[0] * start.x + normal[1] * start.y,
+            });
+            let affine = placement.perspective == Vector2::zeros();
+            let first = frame.image_from_template(edge.start);
+            let step = frame.e1 * edge.step.x + frame.e2 * edge.step.y;
+            for k in 0..edge.count {
+                let i = edge.first + k;
+                let p = if affine {
+                    first + step * k as f64
+                } else {
+                    placement.image_from_template(edge.start + edge.step * k as f64)
+                };
+                self.pos_x[i] = p.x;
+                self.pos_y[i] = p.y;
+                self.rel_x[i] = p.x - frame.origin.x;
+                self.rel_y[i] = p.y - frame.origin.y;
+                self.nrm_x[i] = normal[0];
+                self.nrm_y[i] = normal[1];
+                let sign = match fixed_sign {
+                    Some(s) => s,
+                    None => {
+                        let r = self.ref_contrast[i];
+                        if r.abs() >= self.config.min_contrast as f32 { r.signum() as i32 } else { 0 }
+                    }
+                };
+                search_point(image, &side, p.x, p.y, search_px, sign, self.config.min_contrast, &mut self.edges[i]);
+                let reference = self.ref_inside[i];
+                if self.config.appearance_px_per_grey > 0.0 && reference >= 0.0 {
+                    let gain = self.config.appearance_px_per_grey as f32;
+                    let tolerance = self.config.appearance_tolerance as f32;
+                    let e = &mut self.edges[i];
+                    for c in &mut e.candidates[..e.count as usize] {
+                        c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.
+    fn judge(&mut self, placement: &Placement) -> Option<LostReason> {
+        let frame = &placement.frame;
+        let n = self.template.points().len();
+        let (mut outside, mut with_edge, mut inliers, mut sq) = (0usize, 0usize, 0usize, 0.0);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        let (mut axx, mut axy, mut ayy) = (0.0, 0.0, 0.0);
+        for i in 0..n {
+            let (nx, ny) = (self.nrm_x[i], self.nrm_y[i]);
+            axx += nx * nx;
+            axy += nx * ny;
+            ayy += ny * ny;
+            if self.edges[i].outside {
+                outside += 1;
+            }
+            if self.fit.chosen[i] >= 0 {
+                with_edge += 1;
+                let r = self.fit.residual[i];
+                if r.abs() <= self.config.inlier_px {
+                    inliers += 1;
+                    sq += r * r;
+                    sxx += nx * nx;
+                    sxy += nx * ny;
+                    syy += ny * ny;
+                }
+            }
+        }
+        let nf = n as f64;
+        let residual_px = if inliers > 0 { (sq / inliers as f64).sqrt() } else { 0.0 };
+        let inlier_fraction = inliers as f64 / nf;
+        // How well the inliers pin the contour down in its worst direction, relative to what
+        // all its points would: the smallest eigenvalue of Σ n nᵀ over the inliers over that
+        // of all points. A contour whose left and right sides found nothing cannot tell where
+        // it is along x, however many inliers remain on the others.
+        let lambda_min = |xx: f64, xy: f64, yy: f64| 0.5 * (xx + yy - ((xx - yy).powi(2) + 4.0 * xy * xy).sqrt());
+        let full = lambda_min(axx, axy, ayy);
+        let direction_support = if full > 0.0 { lambda_min(sxx, sxy, syy) / full } else { 0.0 };
+        self.confidence = Confidence {
+            edge_fraction: with_edge as f64 / nf,
+            inlier_fraction,
+            residual_px,
+            outside_fraction: outside as f64 / nf,
+            direction_support,
+            score: inlier_fraction * (-(residual_px / self.config.inlier_px).powi(2)).exp(),
+        };
+        let c = &self.confidence;
+        if !frame.is_finite() || !placement.perspective.iter().all(|v| v.is_finite()) {
+            return Some(LostReason::NotFinite);
+        }
+        if c.outside_fraction > self.config.max_outside_fraction {
+            return Some(LostReason::LeftImage { outside_fraction: c.outside_fraction });
+        }
+        if c.edge_fraction < self.config.min_edge_fraction {
+            return Some(LostReason::TooFewEdges { edge_fraction: c.edge_fraction });
+        }
+        if c.inlier_fraction < self.config.min_inlier_fraction {
+            return Some(LostReason::TooFewInliers { inlier_fraction: c.inlier_fraction });
+        }
+        if c.direction_support < self.config.min_direction_support {
+            return Some(LostReason::Unconstrained { direction_support: c.direction_support });
+        }
+        if self.updates >= 3 && c.inlier_fraction < self.config.min_inlier_ratio_to_recent * self.recent_inliers {
+            return Some(LostReason::SuddenDrop { inlier_fraction: c.inlier_fraction, recent: self.recent_inliers });
+        }
+        if c.residual_px > self.config.max_residual_px {
+            return Some(LostReason::ResidualTooLarge { rms_px: c.residual_px });
+        }
+        let det = frame.det();
+        if det.signum() != self.initial_det.signum() || det == 0.0 {
+            return Some(LostReason::FlippedBasis);
+        }
+        let area_ratio = det / self.initial_det;
+        let deformation = AffineFrame::new(
+            Vector2::zeros(),
+            (frame.basis() * self.initial_basis_inv).column(0).into(),
+            (frame.basis() * self.initial_basis_inv).column(1).into(),
+        );
+        let squash = deformation.anisotropy();
+        if squash > self.config.max_squash
+            || area_ratio > self.config.max_area_change
+            || area_ratio < 1.0 / self.config.max_area_change
+        {
+            return Some(LostReason::DegenerateBasis { squash, area_ratio });
+        }
+        // Perspective must not bend the template through the horizon: across the polygon the
+        // scale `1 / (1 + w·q)` stays within a factor of 3 of the origin's.
+        let horizon_ok = self.template.corners().iter().all(|c| {
+            let d = placement.denominator(*c);
+            d > 1.0 / 3.0 && d < 3.0
+        });
+        if !horizon_ok {
+            return Some(LostReason::DegenerateBasis { squash, area_ratio });
+        }
+        None
+    }
+
+    /// Each inlier point's reference contrast follows the edge it locked on to; with
+    /// [`EdgeSign::Learned`] its sign is the point's polarity from then on.
+    fn learn(&mut self) {
+        let rate = if self.updates == 0 { 1.0 } else { self.config.contrast_learning_rate as f32 };
+        let appearance_rate = self.config.appearance_learning_rate as f32;
+        for i in 0..self.template.points().len() {
+            let k = self.fit.chosen[i];
+            if k < 0 || self.fit.residual[i].abs() > self.config.inlier_px {
+                continue;
+            }
+            let cand = self.edges[i].candidates[k as usize];
+            let inside = &mut self.ref_inside[i];
+            if *inside < 0.0 {
+                *inside = cand.inside as f32;
+            } else if cand.penalty_px <= 0.0 {
+                // Only an edge that already looks right teaches: an appearance that creeps away
+                // (a neighbouring face widening beside the edge) must not drag the reference.
+                *inside += appearance_rate * (cand.inside as f32 - *inside);
+            }
+            let c = cand.contrast;
+            let r = &mut self.ref_contrast[i];
+            // A point that has learnt a sign keeps it: only same-sign edges update it.
+            if *r == 0.0 || r.signum() == c.signum() || self.config.edge_sign != EdgeSign::Learned {
+                *r += rate * (c - *r);
+            }
+        }
+    }
+
+    /// Current state.
+    pub fn state(&self) -> TrackState {
+        self.state
+    }
+
+    /// Quality of the last update.
+    pub fn confidence(&self) -> Confidence {
+        self.confidence
+    }
+
+    /// Updates run since (re-)initialisation, including the one that lost the contour.
+    pub fn update_count(&self) -> u64 {
+        self.updates
+    }
+
+    /// The current affine frame (the last good one once lost). With the projective model it
+    /// is the contour's local affine frame at the template origin.
+    pub fn frame(&self) -> AffineFrame {
+        self.placement.frame
+    }
+
+    /// The full placement: affine frame plus perspective term.
+    pub fn placement(&self) -> Placement {
+        self.placement
+    }
+
+    /// The template (corners and points in affine coordinates).
+    pub fn template(&self) -> &Template {
+        &self.template
+    }
+
+    /// Settings in use.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// Current corners in image pixels, in the order given at initialisation.
+    pub fn corners(&self) -> impl ExactSizeIterator<Item = Vector2<f64>> + '_ {
+        self.template.corners().iter().map(|c| self.placement.image_from_template(*c))
+    }
+
+    /// Image position of template coordinates `(s, t)`.
+    pub fn image_from_template(&self, st: Vector2<f64>) -> Vector2<f64> {
+        self.placement.image_from_template(st)
+    }
+
+    /// Template coordinates of an image point (`None` if the frame were singular).
+    pub fn template_from_image(&self, x: Vector2<f64>) -> Option<Vector2<f64>> {
+        self.placement.template_from_image(x)
+    }
+
+    /// Estimated velocity of the origin, px/s.
+    pub fn velocity_px_per_s(&self) -> [f64; 2] {
+        self.filter.origin_velocity()
+    }
+
+    /// The sampling points of the last search pass, image px (for overlays and debugging).
+    pub fn sample_points(&self) -> impl ExactSizeIterator<Item = Vector2<f64>> + '_ {
+        self.pos_x.iter().zip(&self.pos_y).map(|(x, y)| Vector2::new(*x, *y))
+    }
+
+    /// What each point's search found in the last pass (for overlays and diagnosis).
+    pub fn search_lines(&self) -> impl ExactSizeIterator<Item = SearchLine<'_>> + '_ {
+        (0..self.pos_x.len()).map(move |i| SearchLine {
+            point: Vector2::new(self.pos_x[i], self.pos_y[i]),
+            normal: Vector2::new(self.nrm_x[i], self.nrm_y[i]),
+            candidates: self.edges[i].as_slice(),
+            chosen: usize::try_from(self.fit.chosen[i]).ok(),
+            residual_px: self.fit.residual[i],
+            outside: self.edges[i].outside,
+        })
+    }
+
+    /// Per point of the last pass: the accepted edge's image position, if it was an inlier.
+    pub fn inlier_edges(&self) -> impl Iterator<Item = Vector2<f64>> + '_ {
+        (0..self.pos_x.len()).filter_map(move |i| {
+            let k = self.fit.chosen[i];
+            if k < 0 || self.fit.residual[i].abs() > self.config.inlier_px {
+                return None;
+            }
+            let h = self.edges[i].candidates[k as usize].h_px as f64;
+            Some(Vector2::new(self.pos_x[i] + h * self.nrm_x[i], self.pos_y[i] + h * self.nrm_y[i]))
+        })
+    }
+}
