@@ -3,3 +3,4 @@
 
 pub mod affine;
 pub mod image;
+pub mod planner;
