@@ -3,7 +3,7 @@
 //! Stages, all in integer arithmetic on whole rows so the compiler vectorises them:
 //! 1. Smoothing by a separable 5-tap binomial kernel `[1 4 6 4 1]/16` (σ ≈ 1 px), kept at
 //!    4 extra bits of precision (values ×16) so the gradient of weak edges is not quantised away.
-//! 2. Sobel gradient (`i16`) and squared magnitude (`u32`).
+//! 2. Sobel gradient (`i16`) and squared magnitude (`i32`).
 //! 3. Non-maximum suppression along the dominant gradient axis (horizontal when `|gx| ≥ |gy|`,
 //!    else vertical) with a parabolic fit of the magnitude through the three samples for the
 //!    sub-pixel peak, after Devernay (1995): comparing along the pixel axes rather than the
@@ -43,7 +43,7 @@ pub struct EdgeConfig {
 
 impl Default for EdgeConfig {
     fn default() -> Self {
-        Self { low_grad: 2.5, high_grad: 6.0 }
+        Self { low_grad: 1.5, high_grad: 4.0 }
     }
 }
 
@@ -90,7 +90,8 @@ pub struct EdgeDetector {
     smooth: Vec<u16>,
     gx: Vec<i16>,
     gy: Vec<i16>,
-    mag2: Vec<u32>,
+    mag2: Vec<i32>,
+    flags: Vec<i32>,
     /// 0 none, 1 weak maximum, 2 strong (or connected to strong).
     class: Vec<u8>,
     candidates: Vec<(u32, EdgePoint)>,
@@ -110,6 +111,7 @@ impl EdgeDetector {
             gx: Vec::new(),
             gy: Vec::new(),
             mag2: Vec::new(),
+            flags: Vec::new(),
             class: Vec::new(),
             candidates: Vec::new(),
             stack: Vec::new(),
@@ -130,8 +132,7 @@ impl EdgeDetector {
             return &self.map;
         }
         self.smooth_image(img);
-        self.gradient(w, h);
-        self.suppress(w, h);
+        self.gradient_and_suppress(w, h);
         self.hysteresis(w, h);
         &self.map
     }
@@ -144,6 +145,7 @@ impl EdgeDetector {
             self.gx = vec![0; n];
             self.gy = vec![0; n];
             self.mag2 = vec![0; n];
+            self.flags = vec![0; w];
             self.class = vec![0; n];
             self.map.index = vec![EdgeMap::NONE; n];
             self.map.width = w;
@@ -193,7 +195,9 @@ impl EdgeDetector {
         }
     }
 
-    fn gradient(&mut self, w: usize, h: usize) {
+    /// Sobel gradient row by row, with non-maximum suppression of the previous row done
+    /// right after (its three magnitude rows are still in cache).
+    fn gradient_and_suppress(&mut self, w: usize, h: usize) {
         // Borders (first/last row and column) have no gradient.
         self.gx[..w].fill(0);
         self.gy[..w].fill(0);
@@ -202,56 +206,92 @@ impl EdgeDetector {
         self.gy[(h - 1) * w..].fill(0);
         self.mag2[(h - 1) * w..].fill(0);
         for y in 1..h - 1 {
-            let up = &self.smooth[(y - 1) * w..y * w];
-            let mid = &self.smooth[y * w..(y + 1) * w];
-            let dn = &self.smooth[(y + 1) * w..(y + 2) * w];
-            let gx = &mut self.gx[y * w..(y + 1) * w];
-            let gy = &mut self.gy[y * w..(y + 1) * w];
-            let m2 = &mut self.mag2[y * w..(y + 1) * w];
-            gx[0] = 0;
-            gy[0] = 0;
-            m2[0] = 0;
-            gx[w - 1] = 0;
-            gy[w - 1] = 0;
-            m2[w - 1] = 0;
-            let n = w - 2;
-            let (ul, uc, ur) = (&up[0..n], &up[1..n + 1], &up[2..n + 2]);
-            let (ml, mr) = (&mid[0..n], &mid[2..n + 2]);
-            let (dl, dc, dr) = (&dn[0..n], &dn[1..n + 1], &dn[2..n + 2]);
-            let (gxo, gyo, m2o) = (&mut gx[1..n + 1], &mut gy[1..n + 1], &mut m2[1..n + 1]);
-            for i in 0..n {
-                let sx = (ur[i] as i16 - ul[i] as i16) + 2 * (mr[i] as i16 - ml[i] as i16) + (dr[i] as i16 - dl[i] as i16);
-                let sy = (dl[i] as i16 + 2 * dc[i] as i16 + dr[i] as i16) - (ul[i] as i16 + 2 * uc[i] as i16 + ur[i] as i16);
-                gxo[i] = sx;
-                gyo[i] = sy;
-                m2o[i] = (sx as i32 * sx as i32 + sy as i32 * sy as i32) as u32;
+            self.gradient_row(w, y);
+            // Row y−1 has its neighbours above and below now; rows < 2 are border.
+            if y >= 3 {
+                self.suppress_row(w, y - 1);
             }
         }
     }
 
-    fn suppress(&mut self, w: usize, h: usize) {
+    fn gradient_row(&mut self, w: usize, y: usize) {
+        let up = &self.smooth[(y - 1) * w..y * w];
+        let mid = &self.smooth[y * w..(y + 1) * w];
+        let dn = &self.smooth[(y + 1) * w..(y + 2) * w];
+        let gx = &mut self.gx[y * w..(y + 1) * w];
+        let gy = &mut self.gy[y * w..(y + 1) * w];
+        let m2 = &mut self.mag2[y * w..(y + 1) * w];
+        gx[0] = 0;
+        gy[0] = 0;
+        m2[0] = 0;
+        gx[w - 1] = 0;
+        gy[w - 1] = 0;
+        m2[w - 1] = 0;
+        let n = w - 2;
+        let (ul, uc, ur) = (&up[0..n], &up[1..n + 1], &up[2..n + 2]);
+        let (ml, mr) = (&mid[0..n], &mid[2..n + 2]);
+        let (dl, dc, dr) = (&dn[0..n], &dn[1..n + 1], &dn[2..n + 2]);
+        let (gxo, gyo, m2o) = (&mut gx[1..n + 1], &mut gy[1..n + 1], &mut m2[1..n + 1]);
+        for i in 0..n {
+            let sx = (ur[i] as i16 - ul[i] as i16) + 2 * (mr[i] as i16 - ml[i] as i16) + (dr[i] as i16 - dl[i] as i16);
+            let sy = (dl[i] as i16 + 2 * dc[i] as i16 + dr[i] as i16) - (ul[i] as i16 + 2 * uc[i] as i16 + ur[i] as i16);
+            gxo[i] = sx;
+            gyo[i] = sy;
+            // ≤ 2·16320² < 2³¹: fits i32, which keeps the comparisons below vectorisable.
+            m2o[i] = sx as i32 * sx as i32 + sy as i32 * sy as i32;
+        }
+    }
+
+    /// Non-maximum suppression of row `y` (2 ≤ y < h − 2): a branch-free pass marks the
+    /// maxima above the low threshold, then only those are refined.
+    fn suppress_row(&mut self, w: usize, y: usize) {
         let low = (self.config.low_grad * SOBEL_SCALE).max(1.0);
         let high = (self.config.high_grad * SOBEL_SCALE).max(low);
-        let low2 = (low * low) as u32;
-        let high2 = (high * high) as u32;
+        let low2 = (low * low) as i32;
+        let high2 = (high * high) as i32;
         let inv = 1.0 / SOBEL_SCALE;
-        // Skip a 2-pixel border: its gradient is incomplete.
-        for y in 2..h.saturating_sub(2) {
-            let base = y * w;
-            let row = &self.mag2[base..base + w];
-            for x in 2..w - 2 {
-                let m = row[x];
-                if m < low2 {
-                    continue;
-                }
-                let i = base + x;
-                let (sx, sy) = (self.gx[i], self.gy[i]);
-                let horizontal = sx.unsigned_abs() >= sy.unsigned_abs();
-                let (ma, mb) = if horizontal { (row[x - 1], row[x + 1]) } else { (self.mag2[i - w], self.mag2[i + w]) };
+        let base = y * w;
+        let up = &self.mag2[base - w..base];
+        let row = &self.mag2[base..base + w];
+        let dn = &self.mag2[base + w..base + 2 * w];
+        let (gxr, gyr) = (&self.gx[base..base + w], &self.gy[base..base + w]);
+        // Columns 2..w−2 (the 2-pixel border has incomplete gradients).
+        let n = w - 4;
+        let flags = &mut self.flags[..n];
+        {
+            let (l, c, r) = (&row[1..n + 1], &row[2..n + 2], &row[3..n + 3]);
+            let (u, d) = (&up[2..n + 2], &dn[2..n + 2]);
+            let (sx, sy) = (&gxr[2..n + 2], &gyr[2..n + 2]);
+            // Written with masks rather than branches so it compiles to SIMD even on baseline
+            // x86-64 (SSE2).
+            for i in 0..n {
+                let (ax, ay) = ((sx[i] as i32).abs(), (sy[i] as i32).abs());
+                let hm = -((ax >= ay) as i32);
+                let a = (l[i] & hm) | (u[i] & !hm);
+                let b = (r[i] & hm) | (d[i] & !hm);
+                let m = c[i];
                 // Strict on one side, non-strict on the other: a plateau yields one maximum.
-                if !(m > ma && m >= mb) {
+                flags[i] = -((m >= low2) as i32) & -((m > a) as i32) & -((m >= b) as i32);
+            }
+        }
+        const CHUNK: usize = 16;
+        let mut x0 = 0;
+        while x0 < n {
+            let x1 = (x0 + CHUNK).min(n);
+            if flags[x0..x1].iter().fold(0, |a, &f| a | f) == 0 {
+                x0 = x1;
+                continue;
+            }
+            for k in x0..x1 {
+                if flags[k] == 0 {
                     continue;
                 }
+                let x = k + 2;
+                let i = base + x;
+                let (sx, sy) = (gxr[x], gyr[x]);
+                let m = row[x];
+                let horizontal = sx.unsigned_abs() >= sy.unsigned_abs();
+                let (ma, mb) = if horizontal { (row[x - 1], row[x + 1]) } else { (up[x], dn[x]) };
                 let (a, b, c) = ((ma as f32).sqrt(), (m as f32).sqrt(), (mb as f32).sqrt());
                 let den = a - 2.0 * b + c;
                 let off = if den < 0.0 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
@@ -259,6 +299,7 @@ impl EdgeDetector {
                 self.class[i] = if m >= high2 { 2 } else { 1 };
                 self.candidates.push((i as u32, EdgePoint { x: px, y: py, gx: sx as f32 * inv, gy: sy as f32 * inv }));
             }
+            x0 = x1;
         }
     }
 

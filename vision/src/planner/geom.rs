@@ -34,7 +34,7 @@ pub fn cross(a: P2, b: P2) -> f64 {
 
 #[inline]
 pub fn norm(a: P2) -> f64 {
-    a[0].hypot(a[1])
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
 }
 
 #[inline]

@@ -7,3 +7,4 @@
 pub mod edges;
 pub mod geom;
 pub mod synth;
+pub mod segments;
