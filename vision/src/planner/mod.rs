@@ -8,3 +8,4 @@ pub mod edges;
 pub mod geom;
 pub mod synth;
 pub mod segments;
+pub mod relations;
