@@ -15,7 +15,10 @@ use super::segments::Segment;
 /// Tolerances of the relations.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RelationConfig {
-    /// Largest distance from a segment end to the junction point, pixels.
+    /// Largest distance from a segment end to the junction point, pixels. Lines meeting at
+    /// a small angle interfere over a longer stretch near their corner (their edges blur into
+    /// each other), so the allowance grows as `junction_gap_px · 0.5 / sin(angle)` there, up
+    /// to 2.5x.
     pub junction_gap_px: f64,
     /// Smallest angle between the two lines of a junction, degrees.
     pub junction_min_angle_deg: f64,
@@ -35,7 +38,7 @@ impl Default for RelationConfig {
     fn default() -> Self {
         Self {
             junction_gap_px: 6.0,
-            junction_min_angle_deg: 20.0,
+            junction_min_angle_deg: 12.0,
             parallel_max_angle_deg: 3.0,
             collinear_max_offset_px: 1.5,
             collinear_max_gap_px: 30.0,
@@ -196,7 +199,7 @@ pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &R
     for (ia, a) in segments.iter().enumerate() {
         for (end, q) in [(End::P0, a.p0), (End::P1, a.p1)] {
             // The other segment comes within 2·gap of this end (end → point → its end).
-            let r = 2.0 * gap;
+            let r = 2.0 * gap * 2.5;
             grid.query([q[0] - r, q[1] - r], [q[0] + r, q[1] + r], &mut near);
             for &ib in &near {
                 if ib as usize == ia {
@@ -204,9 +207,11 @@ pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &R
                 }
                 let b = &segments[ib as usize];
                 let (da, db) = (a.dir(), b.dir());
-                if geom::cross(da, db).abs() < min_sin {
+                let sin = geom::cross(da, db).abs();
+                if sin < min_sin {
                     continue;
                 }
+                let gap = (gap * 0.5 / sin).clamp(gap, 2.5 * gap);
                 let Some((x, s, t)) = geom::intersect_lines(a.p0, da, b.p0, db) else { continue };
                 let s_end = if end == End::P0 { 0.0 } else { a.length() };
                 if (s - s_end).abs() > gap {

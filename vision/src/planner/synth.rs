@@ -242,6 +242,22 @@ pub struct StereoPair {
     pub cage: Vec<([f64; 3], [f64; 4])>,
 }
 
+impl StereoPair {
+    /// The ground truth in the scorer's form.
+    pub fn truth(&self) -> Vec<super::score::TruthFace> {
+        self.faces
+            .iter()
+            .map(|f| super::score::TruthFace {
+                left: f.left.clone(),
+                right: f.right.clone(),
+                visible_left_px: f.visible_left_px as f64,
+                visible_right_px: f.visible_right_px as f64,
+                corners_m: Some(f.corners_m.clone()),
+            })
+            .collect()
+    }
+}
+
 /// Boxes on a table, two affine cameras ~20° apart, Lambertian shading.
 #[derive(Debug, Clone)]
 pub struct SynthScene {

@@ -1,0 +1,516 @@
+//! Coplanarity grouping: planes as left-to-right affine transfers, grown from seed groups,
+//! and hypothesis selection.
+//!
+//! Under weak perspective the images of a plane in the two views are related by an affine
+//! map `x' = A x + b` (6 parameters). A matched segment pair constrains it linearly: both
+//! ends of the left segment, transferred, must lie on the right segment's line (2 equations;
+//! this holds however the segment ends are truncated in either view). The epipolar
+//! constraint adds `n_l + Aᵀ n_r = 0`, `n_r·b + n0 = 0` for any true plane; since it is only
+//! weakly known it enters as down-weighted rows (at the left end points), which pins the
+//! directions the line equations leave free — two junction-connected segments then suffice
+//! for a seed.
+//!
+//! Each pair of friends seeds a hypothesis; it grows by alternating support (candidates whose
+//! transferred left segment lies on the right segment within `line_tol_px` and overlaps it)
+//! and least-squares refits, first near the seed, then over the whole image. Seeds already
+//! explained by a grown hypothesis are skipped, which keeps the work near-linear in practice.
+//! Hypothesis selection is greedy: the plane with the most newly explained segment length is
+//! accepted, its matches fix their left segments' correspondences (a segment on a crease may
+//! still belong to several planes, with the same match), and the remaining hypotheses are
+//! re-scored lazily.
+
+use std::collections::BinaryHeap;
+
+use nalgebra::{Matrix6, Vector6};
+
+use super::geom::{self, P2};
+use super::matching::{Candidates, EpipolarFrame, Friendship};
+use super::relations::SegmentGrid;
+use super::segments::Segment;
+
+/// A left-to-right affine transfer `x' = A x + b`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transfer {
+    /// Row-major `A`.
+    pub a: [[f64; 2]; 2],
+    pub b: P2,
+}
+
+impl Transfer {
+    pub const IDENTITY: Transfer = Transfer { a: [[1.0, 0.0], [0.0, 1.0]], b: [0.0, 0.0] };
+
+    #[inline]
+    pub fn apply(&self, x: P2) -> P2 {
+        [self.a[0][0] * x[0] + self.a[0][1] * x[1] + self.b[0], self.a[1][0] * x[0] + self.a[1][1] * x[1] + self.b[1]]
+    }
+
+    pub fn det(&self) -> f64 {
+        self.a[0][0] * self.a[1][1] - self.a[0][1] * self.a[1][0]
+    }
+
+    /// The right-to-left transfer; `None` when `A` is singular.
+    pub fn inverse(&self) -> Option<Transfer> {
+        let d = self.det();
+        if d.abs() < 1e-12 {
+            return None;
+        }
+        let ai = [[self.a[1][1] / d, -self.a[0][1] / d], [-self.a[1][0] / d, self.a[0][0] / d]];
+        let b = [-(ai[0][0] * self.b[0] + ai[0][1] * self.b[1]), -(ai[1][0] * self.b[0] + ai[1][1] * self.b[1])];
+        Some(Transfer { a: ai, b })
+    }
+
+    /// The left point whose cyclopean position `(x + T x)/2` is `c`; `None` when degenerate.
+    pub fn from_cyclopean(&self, c: P2) -> Option<P2> {
+        // (I + A)/2 · x + b/2 = c
+        let m = Transfer { a: [[0.5 * (1.0 + self.a[0][0]), 0.5 * self.a[0][1]], [0.5 * self.a[1][0], 0.5 * (1.0 + self.a[1][1])]], b: [0.5 * self.b[0], 0.5 * self.b[1]] };
+        m.inverse().map(|mi| mi.apply(c))
+    }
+
+    /// Cyclopean position of left point `x`.
+    pub fn cyclopean(&self, x: P2) -> P2 {
+        geom::mid(x, self.apply(x))
+    }
+
+    /// Singular values of `A` (largest first).
+    pub fn singular_values(&self) -> (f64, f64) {
+        let [[a, b], [c, d]] = self.a;
+        let s1 = a * a + b * b + c * c + d * d;
+        let det = (a * d - b * c).abs();
+        let disc = (s1 * s1 - 4.0 * det * det).max(0.0).sqrt();
+        (((s1 + disc) * 0.5).sqrt(), ((s1 - disc) * 0.5).max(0.0).sqrt())
+    }
+}
+
+/// Tolerances of plane grouping.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneConfig {
+    /// Largest distance of a transferred left end from the right segment's line, pixels.
+    pub line_tol_px: f64,
+    /// Weight of the (weak) epipolar rows relative to the line rows.
+    pub epipolar_weight: f64,
+    /// Radius around a seed's junction within which it first grows, pixels.
+    pub seed_radius_px: f64,
+    /// Fewest member segments of an accepted plane.
+    pub min_members: usize,
+    /// Least newly explained segment length of an accepted plane, pixels.
+    pub min_support_px: f64,
+    /// Most seeds tried (best first).
+    pub max_seeds: usize,
+    /// Largest singular value ratio of `A` accepted (a plane seen at grazing angle in one view
+    /// has a very anisotropic transfer; beyond this it is a bad fit).
+    pub max_anisotropy: f64,
+}
+
+impl Default for PlaneConfig {
+    fn default() -> Self {
+        Self { line_tol_px: 1.2, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, max_anisotropy: 4.0 }
+    }
+}
+
+/// An accepted plane.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plane {
+    pub transfer: Transfer,
+    /// Member candidate indices (one per left segment, or several covering disjoint
+    /// stretches of it).
+    pub members: Vec<u32>,
+    /// Sum over members of the matched (covered) length, pixels.
+    pub support_px: f64,
+    /// RMS line residual of the members, pixels.
+    pub rms_px: f64,
+}
+
+/// Accumulated normal equations of a transfer fit, in coordinates centred on `origin`.
+#[derive(Debug, Clone)]
+pub struct TransferFit {
+    ata: Matrix6<f64>,
+    atb: Vector6<f64>,
+    origin: P2,
+    rows: usize,
+}
+
+impl TransferFit {
+    pub fn new(origin: P2) -> Self {
+        Self { ata: Matrix6::zeros(), atb: Vector6::zeros(), origin, rows: 0 }
+    }
+
+    fn row(&mut self, c: [f64; 6], t: f64, w: f64) {
+        let v = Vector6::from(c) * w;
+        self.ata += v * v.transpose();
+        self.atb += v * (t * w);
+        self.rows += 1;
+    }
+
+    /// Both ends of left segment `l`, transferred, on the line of right segment `r`.
+    pub fn add_line(&mut self, l: &Segment, r: &Segment, w: f64) {
+        let n = r.bright_normal();
+        let d = geom::dot(n, r.p0);
+        for a in [l.p0, l.p1] {
+            let x = geom::sub(a, self.origin);
+            self.row([n[0] * x[0], n[0] * x[1], n[1] * x[0], n[1] * x[1], n[0], n[1]], d, w);
+        }
+    }
+
+    /// Left point `a` and its transfer obey the epipolar constraint.
+    pub fn add_epipolar(&mut self, ef: &EpipolarFrame, a: P2, w: f64) {
+        let (nl, nr, n0, k) = ef.raw();
+        let x = geom::sub(a, self.origin);
+        let c = [nr[0] * x[0], nr[0] * x[1], nr[1] * x[0], nr[1] * x[1], nr[0], nr[1]];
+        // Scaled to right pixels.
+        self.row(c.map(|v| v * k), -(geom::dot(nl, a) + n0) * k, w);
+    }
+
+    /// Point correspondence `a` → `a2`.
+    pub fn add_point(&mut self, a: P2, a2: P2, w: f64) {
+        let x = geom::sub(a, self.origin);
+        self.row([x[0], x[1], 0.0, 0.0, 1.0, 0.0], a2[0], w);
+        self.row([0.0, 0.0, x[0], x[1], 0.0, 1.0], a2[1], w);
+    }
+
+    pub fn solve(&self) -> Option<Transfer> {
+        if self.rows < 6 {
+            return None;
+        }
+        let p = self.ata.cholesky()?.solve(&self.atb);
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let a = [[p[0], p[1]], [p[2], p[3]]];
+        // Back from centred coordinates: b = b̃ − A·origin.
+        let o = self.origin;
+        let b = [p[4] - (a[0][0] * o[0] + a[0][1] * o[1]), p[5] - (a[1][0] * o[0] + a[1][1] * o[1])];
+        Some(Transfer { a, b })
+    }
+}
+
+/// Line residuals (signed, pixels) of left segment `l` transferred onto right segment `r`,
+/// and whether the transferred segment overlaps `r` along the line.
+pub fn line_residuals(t: &Transfer, l: &Segment, r: &Segment) -> ([f64; 2], bool) {
+    let (q0, q1) = (t.apply(l.p0), t.apply(l.p1));
+    let res = [r.line_distance(q0), r.line_distance(q1)];
+    let (s0, s1) = (r.along(q0), r.along(q1));
+    let (lo, hi) = (s0.min(s1), s0.max(s1));
+    let len = r.length();
+    let ov = hi.min(len) - lo.max(0.0);
+    (res, ov >= 0.25 * (hi - lo).min(len) - 2.0)
+}
+
+/// The inputs of plane grouping.
+pub struct PlaneInput<'a> {
+    pub left: &'a [Segment],
+    pub right: &'a [Segment],
+    pub cands: &'a Candidates,
+    pub friends: &'a [Friendship],
+    pub epipolar: &'a EpipolarFrame,
+    pub width: usize,
+    pub height: usize,
+}
+
+struct Hypothesis {
+    transfer: Transfer,
+    /// Candidate indices, one per left segment.
+    members: Vec<u32>,
+}
+
+/// Grows hypotheses from the friends and selects planes (see the module docs).
+pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
+    let weight = |c: u32| {
+        let c = &inp.cands.list[c as usize];
+        inp.left[c.left as usize].length().min(inp.right[c.right as usize].length())
+    };
+    // Seeds, best (longest) first.
+    let mut seeds: Vec<&Friendship> = inp.friends.iter().collect();
+    seeds.sort_by(|x, y| (weight(y.a) + weight(y.b)).total_cmp(&(weight(x.a) + weight(x.b))));
+    seeds.truncate(cfg.max_seeds);
+
+    let mut grid = SegmentGrid::build(inp.left, inp.width, inp.height, 32.0);
+    let mut near = Vec::new();
+    let mut local = Vec::new();
+    let all: Vec<u32> = (0..inp.cands.list.len() as u32).collect();
+    // Which candidates some grown hypothesis already explains.
+    let mut explained = vec![false; inp.cands.list.len()];
+    let mut hyps: Vec<Hypothesis> = Vec::new();
+    for f in seeds {
+        if explained[f.a as usize] && explained[f.b as usize] {
+            continue;
+        }
+        let (ca, cb) = (&inp.cands.list[f.a as usize], &inp.cands.list[f.b as usize]);
+        let mut fit = TransferFit::new(f.left_point);
+        for c in [ca, cb] {
+            let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
+            fit.add_line(l, r, 1.0);
+            for p in [l.p0, l.p1] {
+                fit.add_epipolar(inp.epipolar, p, cfg.epipolar_weight);
+            }
+        }
+        // The junction points themselves correspond.
+        fit.add_point(f.left_point, f.right_point, 1.0);
+        let Some(mut t) = fit.solve() else { continue };
+        if !plausible(&t, cfg) || !supports(&t, inp, f.a, cfg) || !supports(&t, inp, f.b, cfg) {
+            continue;
+        }
+        // Local growth.
+        let r = cfg.seed_radius_px;
+        let p = f.left_point;
+        grid.query([p[0] - r, p[1] - r], [p[0] + r, p[1] + r], &mut near);
+        local.clear();
+        for &l in &near {
+            local.extend(inp.cands.of_left(l).map(|c| c as u32));
+        }
+        let mut members = Vec::new();
+        for _ in 0..3 {
+            members = support(&t, inp, &local, cfg);
+            if members.len() < 2 {
+                break;
+            }
+            match refit(inp, &members, cfg, p) {
+                Some(t2) if plausible(&t2, cfg) => t = t2,
+                _ => break,
+            }
+        }
+        if members.len() < cfg.min_members {
+            continue;
+        }
+        // Global growth.
+        for _ in 0..2 {
+            members = support(&t, inp, &all, cfg);
+            match refit(inp, &members, cfg, p) {
+                Some(t2) if plausible(&t2, cfg) => t = t2,
+                _ => break,
+            }
+        }
+        members = support(&t, inp, &all, cfg);
+        if members.len() < cfg.min_members {
+            continue;
+        }
+        for &m in &members {
+            explained[m as usize] = true;
+        }
+        hyps.push(Hypothesis { transfer: t, members });
+    }
+    select(inp, hyps, cfg)
+}
+
+fn plausible(t: &Transfer, cfg: &PlaneConfig) -> bool {
+    let (s1, s2) = t.singular_values();
+    t.det() > 0.0 && s2 > 1e-6 && s1 / s2 <= cfg.max_anisotropy && s1 < 4.0 && s2 > 0.25
+}
+
+fn supports(t: &Transfer, inp: &PlaneInput, c: u32, cfg: &PlaneConfig) -> bool {
+    let c = &inp.cands.list[c as usize];
+    let (res, overlap) = line_residuals(t, &inp.left[c.left as usize], &inp.right[c.right as usize]);
+    overlap && res[0].abs() <= cfg.line_tol_px && res[1].abs() <= cfg.line_tol_px
+}
+
+/// The stretch `[lo, hi]` of left segment `l` (as `along` parameters) that right segment `r`
+/// covers under `t`; empty (`lo == hi`) when they do not overlap.
+pub fn coverage(t: &Transfer, l: &Segment, r: &Segment) -> (f64, f64) {
+    let Some(ti) = t.inverse() else { return (0.0, 0.0) };
+    let (a, b) = (l.along(ti.apply(r.p0)), l.along(ti.apply(r.p1)));
+    let lo = a.min(b).max(0.0);
+    let hi = a.max(b).min(l.length());
+    if hi > lo { (lo, hi) } else { (lo, lo) }
+}
+
+/// Whether two stretches of a segment overlap by more than a few pixels.
+pub fn stretches_overlap(a: (f64, f64), b: (f64, f64)) -> bool {
+    a.1.min(b.1) - a.0.max(b.0) > 3.0
+}
+
+/// Candidates among `pool` supporting `t`. A left segment normally has one; it has several
+/// only when they cover disjoint stretches of it (its right image is broken, or it is two
+/// edges that line up in the left view only).
+fn support(t: &Transfer, inp: &PlaneInput, pool: &[u32], cfg: &PlaneConfig) -> Vec<u32> {
+    let mut out: Vec<(u32, u32, f64)> = Vec::new();
+    for &ci in pool {
+        let c = &inp.cands.list[ci as usize];
+        let (res, overlap) = line_residuals(t, &inp.left[c.left as usize], &inp.right[c.right as usize]);
+        let worst = res[0].abs().max(res[1].abs());
+        if overlap && worst <= cfg.line_tol_px {
+            out.push((c.left, ci, worst));
+        }
+    }
+    out.sort_by(|x, y| x.0.cmp(&y.0).then(x.2.total_cmp(&y.2)));
+    let mut kept: Vec<u32> = Vec::with_capacity(out.len());
+    let mut group: Vec<(f64, f64)> = Vec::new();
+    let mut current = u32::MAX;
+    for (l, ci, _) in out {
+        if l != current {
+            current = l;
+            group.clear();
+        }
+        let c = &inp.cands.list[ci as usize];
+        let cov = coverage(t, &inp.left[l as usize], &inp.right[c.right as usize]);
+        if group.iter().all(|g| !stretches_overlap(*g, cov)) {
+            group.push(cov);
+            kept.push(ci);
+        }
+    }
+    kept
+}
+
+fn refit(inp: &PlaneInput, members: &[u32], cfg: &PlaneConfig, origin: P2) -> Option<Transfer> {
+    let mut fit = TransferFit::new(origin);
+    for &m in members {
+        let c = &inp.cands.list[m as usize];
+        let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
+        fit.add_line(l, r, 1.0);
+        for p in [l.p0, l.p1] {
+            fit.add_epipolar(inp.epipolar, p, cfg.epipolar_weight);
+        }
+    }
+    fit.solve()
+}
+
+/// A left segment's stretch claimed by an accepted plane for one right segment.
+#[derive(Debug, Clone, Copy)]
+struct Claim {
+    right: u32,
+    stretch: (f64, f64),
+}
+
+/// Greedy hypothesis selection with lazy re-scoring.
+fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, cfg: &PlaneConfig) -> Vec<Plane> {
+    let mut claims: Vec<Vec<Claim>> = vec![Vec::new(); inp.left.len()];
+    // Per member: (left, right, stretch covered, matched length).
+    let info = |h: &Hypothesis, m: u32| {
+        let c = &inp.cands.list[m as usize];
+        let cov = coverage(&h.transfer, &inp.left[c.left as usize], &inp.right[c.right as usize]);
+        (c.left as usize, c.right, cov, cov.1 - cov.0)
+    };
+    // 0: new, 1: already claimed with this right segment, 2: conflicts with a claim.
+    let status = |claims: &[Vec<Claim>], l: usize, r: u32, cov: (f64, f64)| -> u8 {
+        if claims[l].iter().any(|c| c.right == r) {
+            1
+        } else if claims[l].iter().any(|c| stretches_overlap(c.stretch, cov)) {
+            2
+        } else {
+            0
+        }
+    };
+    let score = |h: &Hypothesis, claims: &[Vec<Claim>]| -> (f64, usize, usize) {
+        let (mut s, mut new, mut ok) = (0.0, 0, 0);
+        for &m in &h.members {
+            let (l, r, cov, w) = info(h, m);
+            match status(claims, l, r, cov) {
+                0 => {
+                    s += w;
+                    new += 1;
+                    ok += 1;
+                }
+                1 => ok += 1,
+                _ => {}
+            }
+        }
+        (s, new, ok)
+    };
+    #[derive(PartialEq)]
+    struct Item(f64, usize);
+    impl Eq for Item {}
+    impl PartialOrd for Item {
+        fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+            Some(self.cmp(o))
+        }
+    }
+    impl Ord for Item {
+        fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+            self.0.total_cmp(&o.0).then(o.1.cmp(&self.1))
+        }
+    }
+    let mut heap: BinaryHeap<Item> = hyps.iter().enumerate().map(|(i, h)| Item(score(h, &claims).0, i)).collect();
+    let mut accepted: Vec<usize> = Vec::new();
+    while let Some(Item(s, i)) = heap.pop() {
+        let (now, new, ok) = score(&hyps[i], &claims);
+        if now < s - 1e-9 {
+            // Stale: re-queue with the current score.
+            if now > 0.0 {
+                heap.push(Item(now, i));
+            }
+            continue;
+        }
+        if new == 0 || now < cfg.min_support_px || ok < cfg.min_members {
+            continue;
+        }
+        for &m in &hyps[i].members {
+            let (l, r, cov, _) = info(&hyps[i], m);
+            if status(&claims, l, r, cov) == 0 {
+                claims[l].push(Claim { right: r, stretch: cov });
+            }
+        }
+        accepted.push(i);
+    }
+    // Final membership: every accepted plane takes all claimed supporters, then refits.
+    let all: Vec<u32> = (0..inp.cands.list.len() as u32)
+        .filter(|&ci| {
+            let c = &inp.cands.list[ci as usize];
+            claims[c.left as usize].iter().any(|k| k.right == c.right)
+        })
+        .collect();
+    let mut planes = Vec::new();
+    for i in accepted {
+        let mut t = hyps[i].transfer;
+        let mut members = support(&t, inp, &all, cfg);
+        if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint()) {
+            if let Some(t2) = refit(inp, &members, cfg, origin).filter(|t2| plausible(t2, cfg)) {
+                t = t2;
+                members = support(&t, inp, &all, cfg);
+            }
+        }
+        if members.len() < cfg.min_members {
+            continue;
+        }
+        let mut sq = 0.0;
+        let mut support_px = 0.0;
+        for &m in &members {
+            let c = &inp.cands.list[m as usize];
+            let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
+            let (res, _) = line_residuals(&t, l, r);
+            sq += res[0] * res[0] + res[1] * res[1];
+            let cov = coverage(&t, l, r);
+            support_px += cov.1 - cov.0;
+        }
+        let rms_px = (sq / (2 * members.len()) as f64).sqrt();
+        planes.push(Plane { transfer: t, members, support_px, rms_px });
+    }
+    planes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transfer_inverse_and_cyclopean_round_trip() {
+        let t = Transfer { a: [[0.9, 0.1], [-0.05, 1.1]], b: [-20.0, 3.0] };
+        let ti = t.inverse().unwrap();
+        let x = [123.0, 45.0];
+        let back = ti.apply(t.apply(x));
+        assert!(geom::dist(back, x) < 1e-9);
+        let c = t.cyclopean(x);
+        assert!(geom::dist(t.from_cyclopean(c).unwrap(), x) < 1e-9);
+        let (s1, s2) = t.singular_values();
+        assert!((s1 * s2 - t.det().abs()).abs() < 1e-9 && s1 >= s2);
+    }
+
+    #[test]
+    fn fit_from_three_lines_recovers_the_transfer() {
+        let truth = Transfer { a: [[0.92, 0.07], [-0.03, 1.04]], b: [-25.0, 4.0] };
+        let seg = |p0: P2, p1: P2| Segment { p0, p1, contrast: 10.0, rms_px: 0.1, n_points: 20 };
+        // Three non-parallel left segments; their right images are the transferred lines,
+        // but with ends truncated differently (only the lines matter).
+        let lefts = [seg([100.0, 100.0], [180.0, 110.0]), seg([100.0, 100.0], [90.0, 170.0]), seg([150.0, 160.0], [190.0, 120.0])];
+        let mut fit = TransferFit::new([120.0, 120.0]);
+        for l in &lefts {
+            let (q0, q1) = (truth.apply(l.p0), truth.apply(l.p1));
+            let d = geom::sub(q1, q0);
+            let r = seg(geom::add(q0, geom::scale(d, 0.1)), geom::add(q0, geom::scale(d, 0.8)));
+            fit.add_line(l, &r, 1.0);
+            let (res, overlap) = line_residuals(&truth, l, &r);
+            assert!(res[0].abs() < 1e-9 && res[1].abs() < 1e-9 && overlap);
+        }
+        let t = fit.solve().unwrap();
+        for x in [[0.0, 0.0], [300.0, 200.0]] {
+            assert!(geom::dist(t.apply(x), truth.apply(x)) < 1e-6);
+        }
+    }
+}
