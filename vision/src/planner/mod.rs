@@ -261,7 +261,10 @@ fn match_views(ls: &[Segment], rs: &[Segment], rl: &Relations, rr: &Relations, g
 
 fn group_planes(ls: &[Segment], rs: &[Segment], cands: &Candidates, friends: &[Friendship], geo: &StereoGeometry, left: &ImageView, cfg: &PlannerConfig) -> Vec<Plane> {
     let ef = EpipolarFrame::new(&geo.epipolar);
-    planes::find_planes(&PlaneInput { left: ls, right: rs, cands, friends, epipolar: &ef, width: left.width(), height: left.height() }, &cfg.planes)
+    planes::find_planes(
+        &PlaneInput { left: ls, right: rs, cands, friends, epipolar: &ef, epipolar_tol_px: cfg.matching.epipolar_tol_px, width: left.width(), height: left.height() },
+        &cfg.planes,
+    )
 }
 
 /// Refits the epipolar constraint to the junction correspondences of friends that both lie on

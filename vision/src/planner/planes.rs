@@ -10,10 +10,12 @@
 //! directions the line equations leave free — two junction-connected segments then suffice
 //! for a seed.
 //!
-//! Each pair of friends seeds a hypothesis; it grows by alternating support (candidates whose
+//! Chains of two friendships (three segments meeting at two junctions), then single
+//! friendships, seed hypotheses; each grows by alternating support (candidates whose
 //! transferred left segment lies on the right segment within `line_tol_px` and overlaps it)
-//! and least-squares refits, first near the seed, then over the whole image. Seeds already
-//! explained by a grown hypothesis are skipped, which keeps the work near-linear in practice.
+//! and least-squares refits, first near the seed, then over the whole image. A seed whose two
+//! candidates are both members of one grown hypothesis is skipped (it would grow the same
+//! plane again), which keeps the work near-linear in practice.
 //! Hypothesis selection is greedy: the plane with the most newly explained segment length is
 //! accepted, its matches fix their left segments' correspondences (a segment on a crease may
 //! still belong to several planes, with the same match), and the remaining hypotheses are
@@ -202,6 +204,10 @@ pub struct PlaneInput<'a> {
     pub cands: &'a Candidates,
     pub friends: &'a [Friendship],
     pub epipolar: &'a EpipolarFrame,
+    /// The epipolar tolerance of the matcher: a plane's transfer must keep the points it is
+    /// fitted to within this of their epipolar lines (an affine map through a chain of three
+    /// lines always exists; only a real plane's also honours the epipolar geometry).
+    pub epipolar_tol_px: f64,
     pub width: usize,
     pub height: usize,
 }
@@ -218,40 +224,70 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         let c = &inp.cands.list[c as usize];
         inp.left[c.left as usize].length().min(inp.right[c.right as usize].length())
     };
-    // Seeds, best (longest) first.
-    let mut seeds: Vec<&Friendship> = inp.friends.iter().collect();
-    seeds.sort_by(|x, y| (weight(y.a) + weight(y.b)).total_cmp(&(weight(x.a) + weight(x.b))));
+    let n = inp.cands.list.len();
+    // Friendships of each candidate.
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for (k, f) in inp.friends.iter().enumerate() {
+        adj[f.a as usize].push(k as u32);
+        adj[f.b as usize].push(k as u32);
+    }
+    // Seeds: chains of two friendships (three segments, two junctions: the transfer is fully
+    // determined even when the middle segment runs along the epipolar lines), then single
+    // friendships; heaviest first within each kind.
+    let mut seeds: Vec<(Vec<u32>, Vec<u32>, f64)> = Vec::new();
+    for b in 0..n {
+        for (x, &f1) in adj[b].iter().enumerate() {
+            for &f2 in &adj[b][x + 1..] {
+                let (p, q) = (&inp.friends[f1 as usize], &inp.friends[f2 as usize]);
+                let a = if p.a as usize == b { p.b } else { p.a };
+                let c = if q.a as usize == b { q.b } else { q.a };
+                let lefts = [inp.cands.list[a as usize].left, inp.cands.list[b].left, inp.cands.list[c as usize].left];
+                if a == c || lefts[0] == lefts[2] || geom::dist(p.left_point, q.left_point) < 3.0 {
+                    continue;
+                }
+                seeds.push((vec![a, b as u32, c], vec![f1, f2], weight(a) + weight(b as u32) + weight(c)));
+            }
+        }
+    }
+    seeds.sort_by(|x, y| y.2.total_cmp(&x.2));
+    let mut pairs: Vec<(Vec<u32>, Vec<u32>, f64)> = inp.friends.iter().enumerate().map(|(k, f)| (vec![f.a, f.b], vec![k as u32], weight(f.a) + weight(f.b))).collect();
+    pairs.sort_by(|x, y| y.2.total_cmp(&x.2));
+    seeds.extend(pairs);
     seeds.truncate(cfg.max_seeds);
 
     let mut grid = SegmentGrid::build(inp.left, inp.width, inp.height, 32.0);
     let mut near = Vec::new();
     let mut local = Vec::new();
-    let all: Vec<u32> = (0..inp.cands.list.len() as u32).collect();
-    // Which candidates some grown hypothesis already explains.
-    let mut explained = vec![false; inp.cands.list.len()];
+    let all: Vec<u32> = (0..n as u32).collect();
+    let mut scratch = vec![false; n];
+    // The grown hypotheses each candidate belongs to: a seed whose candidates already all
+    // share one would only grow that hypothesis again.
+    let mut member_of: Vec<Vec<u32>> = vec![Vec::new(); n];
     let mut hyps: Vec<Hypothesis> = Vec::new();
-    for f in seeds {
-        if explained[f.a as usize] && explained[f.b as usize] {
+    for (cs, fs, _) in seeds {
+        if member_of[cs[0] as usize].iter().any(|h| cs[1..].iter().all(|&c| member_of[c as usize].contains(h))) {
             continue;
         }
-        let (ca, cb) = (&inp.cands.list[f.a as usize], &inp.cands.list[f.b as usize]);
-        let mut fit = TransferFit::new(f.left_point);
-        for c in [ca, cb] {
+        let p = inp.friends[fs[0] as usize].left_point;
+        let mut fit = TransferFit::new(p);
+        for &c in &cs {
+            let c = &inp.cands.list[c as usize];
             let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
             fit.add_line(l, r, 1.0);
-            for p in [l.p0, l.p1] {
-                fit.add_epipolar(inp.epipolar, p, cfg.epipolar_weight);
+            for q in [l.p0, l.p1] {
+                fit.add_epipolar(inp.epipolar, q, cfg.epipolar_weight);
             }
         }
-        // The junction points themselves correspond.
-        fit.add_point(f.left_point, f.right_point, 1.0);
+        for &f in &fs {
+            let f = &inp.friends[f as usize];
+            fit.add_point(f.left_point, f.right_point, 1.0);
+        }
         let Some(mut t) = fit.solve() else { continue };
-        if !plausible(&t, cfg) || !supports(&t, inp, f.a, cfg) || !supports(&t, inp, f.b, cfg) {
+        if !plausible(&t, cfg) || !cs.iter().all(|&c| supports(&t, inp, c, cfg)) || !epipolar_consistent(&t, inp, &cs) {
             continue;
         }
         // Local growth.
         let r = cfg.seed_radius_px;
-        let p = f.left_point;
         grid.query([p[0] - r, p[1] - r], [p[0] + r, p[1] + r], &mut near);
         local.clear();
         for &l in &near {
@@ -263,8 +299,8 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
             if members.len() < 2 {
                 break;
             }
-            match refit(inp, &members, cfg, p) {
-                Some(t2) if plausible(&t2, cfg) => t = t2,
+            match refit(inp, &members, &adj, &mut scratch, cfg, p) {
+                Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
                 _ => break,
             }
         }
@@ -274,8 +310,8 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         // Global growth.
         for _ in 0..2 {
             members = support(&t, inp, &all, cfg);
-            match refit(inp, &members, cfg, p) {
-                Some(t2) if plausible(&t2, cfg) => t = t2,
+            match refit(inp, &members, &adj, &mut scratch, cfg, p) {
+                Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
                 _ => break,
             }
         }
@@ -284,16 +320,25 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
             continue;
         }
         for &m in &members {
-            explained[m as usize] = true;
+            member_of[m as usize].push(hyps.len() as u32);
         }
         hyps.push(Hypothesis { transfer: t, members });
     }
-    select(inp, hyps, cfg)
+    select(inp, hyps, &adj, cfg)
 }
 
 fn plausible(t: &Transfer, cfg: &PlaneConfig) -> bool {
     let (s1, s2) = t.singular_values();
     t.det() > 0.0 && s2 > 1e-6 && s1 / s2 <= cfg.max_anisotropy && s1 < 4.0 && s2 > 0.25
+}
+
+/// Whether `t` keeps the end points of the left segments of `members` within the epipolar
+/// tolerance of their epipolar lines.
+fn epipolar_consistent(t: &Transfer, inp: &PlaneInput, members: &[u32]) -> bool {
+    members.iter().all(|&m| {
+        let l = &inp.left[inp.cands.list[m as usize].left as usize];
+        [l.p0, l.p1].iter().all(|&x| inp.epipolar.residual(x, t.apply(x)).abs() <= inp.epipolar_tol_px)
+    })
 }
 
 fn supports(t: &Transfer, inp: &PlaneInput, c: u32, cfg: &PlaneConfig) -> bool {
@@ -349,8 +394,14 @@ fn support(t: &Transfer, inp: &PlaneInput, pool: &[u32], cfg: &PlaneConfig) -> V
     kept
 }
 
-fn refit(inp: &PlaneInput, members: &[u32], cfg: &PlaneConfig, origin: P2) -> Option<Transfer> {
+/// Least-squares transfer of `members`: their line equations, the junction points of
+/// friendships between them (point correspondences, which also fix the transfer along
+/// segments that run with the epipolar lines), and weak epipolar rows.
+fn refit(inp: &PlaneInput, members: &[u32], adj: &[Vec<u32>], scratch: &mut [bool], cfg: &PlaneConfig, origin: P2) -> Option<Transfer> {
     let mut fit = TransferFit::new(origin);
+    for &m in members {
+        scratch[m as usize] = true;
+    }
     for &m in members {
         let c = &inp.cands.list[m as usize];
         let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
@@ -358,6 +409,16 @@ fn refit(inp: &PlaneInput, members: &[u32], cfg: &PlaneConfig, origin: P2) -> Op
         for p in [l.p0, l.p1] {
             fit.add_epipolar(inp.epipolar, p, cfg.epipolar_weight);
         }
+        for &f in &adj[m as usize] {
+            let f = &inp.friends[f as usize];
+            // Each friendship once, from its first candidate.
+            if f.a == m && scratch[f.b as usize] {
+                fit.add_point(f.left_point, f.right_point, 1.0);
+            }
+        }
+    }
+    for &m in members {
+        scratch[m as usize] = false;
     }
     fit.solve()
 }
@@ -370,7 +431,8 @@ struct Claim {
 }
 
 /// Greedy hypothesis selection with lazy re-scoring.
-fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, cfg: &PlaneConfig) -> Vec<Plane> {
+fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, adj: &[Vec<u32>], cfg: &PlaneConfig) -> Vec<Plane> {
+    let mut scratch = vec![false; inp.cands.list.len()];
     let mut claims: Vec<Vec<Claim>> = vec![Vec::new(); inp.left.len()];
     // Per member: (left, right, stretch covered, matched length).
     let info = |h: &Hypothesis, m: u32| {
@@ -451,7 +513,7 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, cfg: &PlaneConfig) -> Vec<Pla
         let mut t = hyps[i].transfer;
         let mut members = support(&t, inp, &all, cfg);
         if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint()) {
-            if let Some(t2) = refit(inp, &members, cfg, origin).filter(|t2| plausible(t2, cfg)) {
+            if let Some(t2) = refit(inp, &members, adj, &mut scratch, cfg, origin).filter(|t2| plausible(t2, cfg)) {
                 t = t2;
                 members = support(&t, inp, &all, cfg);
             }

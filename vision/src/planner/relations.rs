@@ -38,7 +38,7 @@ impl Default for RelationConfig {
     fn default() -> Self {
         Self {
             junction_gap_px: 6.0,
-            junction_min_angle_deg: 12.0,
+            junction_min_angle_deg: 8.0,
             parallel_max_angle_deg: 3.0,
             collinear_max_offset_px: 1.5,
             collinear_max_gap_px: 30.0,
