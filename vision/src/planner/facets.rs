@@ -29,6 +29,9 @@ pub struct FacetConfig {
     pub min_segments: usize,
     /// Smallest cyclopean area of a facet, square pixels.
     pub min_area_px: f64,
+    /// Hulls closer than this count as intersecting (segment ends stop short of corners
+    /// that no junction restored), pixels.
+    pub touch_px: f64,
     /// Longest chain of edges that may bridge a concavity.
     pub bridge_max_edges: usize,
     /// Weight of the epipolar rows when refitting a facet's transfer.
@@ -37,7 +40,7 @@ pub struct FacetConfig {
 
 impl Default for FacetConfig {
     fn default() -> Self {
-        Self { min_segments: 3, min_area_px: 60.0, bridge_max_edges: 6, epipolar_weight: 0.1 }
+        Self { min_segments: 3, min_area_px: 60.0, touch_px: 3.0, bridge_max_edges: 6, epipolar_weight: 0.1 }
     }
 }
 
@@ -142,7 +145,7 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
                     continue;
                 }
                 for j in i + 1..groups.len() {
-                    if alive[j] && geom::convex_intersect(&hulls[i], &hulls[j], 0.0) {
+                    if alive[j] && geom::convex_intersect(&hulls[i], &hulls[j], cfg.touch_px) {
                         let gj = std::mem::take(&mut groups[j]);
                         groups[i].extend(gj);
                         alive[j] = false;

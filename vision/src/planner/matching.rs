@@ -127,7 +127,9 @@ pub struct MatchConfig {
     pub min_overlap: f64,
     /// Largest change of a segment's orientation between views, degrees.
     pub max_turn_deg: f64,
-    /// Largest ratio of the two segments' contrasts.
+    /// Largest ratio of the two segments' contrasts. Kept loose: an occluding edge's contrast
+    /// changes between views when the surface behind it differs (a side face seen in one view
+    /// only).
     pub max_contrast_ratio: f64,
     /// Segments within this angle of the epipolar lines are matched by band only, degrees.
     pub epipolar_parallel_deg: f64,
@@ -135,7 +137,7 @@ pub struct MatchConfig {
 
 impl Default for MatchConfig {
     fn default() -> Self {
-        Self { epipolar_tol_px: 3.0, min_overlap: 0.3, max_turn_deg: 45.0, max_contrast_ratio: 3.0, epipolar_parallel_deg: 10.0 }
+        Self { epipolar_tol_px: 3.0, min_overlap: 0.3, max_turn_deg: 45.0, max_contrast_ratio: 8.0, epipolar_parallel_deg: 10.0 }
     }
 }
 

@@ -19,7 +19,8 @@
 //! Hypothesis selection is greedy: the plane with the most newly explained segment length is
 //! accepted, its matches fix their left segments' correspondences (a segment on a crease may
 //! still belong to several planes, with the same match), and the remaining hypotheses are
-//! re-scored lazily.
+//! re-scored lazily. Last, hypotheses that explain nothing new are accepted when no single
+//! accepted plane holds most of their segments (a face all of whose edges are shared).
 
 use std::collections::BinaryHeap;
 
@@ -481,25 +482,57 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, adj: &[Vec<u32>], cfg: &Plane
     }
     let mut heap: BinaryHeap<Item> = hyps.iter().enumerate().map(|(i, h)| Item(score(h, &claims).0, i)).collect();
     let mut accepted: Vec<usize> = Vec::new();
+    let mut deferred: Vec<usize> = Vec::new();
+    let accept = |i: usize, claims: &mut Vec<Vec<Claim>>, accepted: &mut Vec<usize>| {
+        for &m in &hyps[i].members {
+            let (l, r, cov, _) = info(&hyps[i], m);
+            if status(claims, l, r, cov) == 0 {
+                claims[l].push(Claim { right: r, stretch: cov });
+            }
+        }
+        accepted.push(i);
+    };
     while let Some(Item(s, i)) = heap.pop() {
         let (now, new, ok) = score(&hyps[i], &claims);
         if now < s - 1e-9 {
             // Stale: re-queue with the current score.
             if now > 0.0 {
                 heap.push(Item(now, i));
+            } else {
+                deferred.push(i);
             }
             continue;
         }
         if new == 0 || now < cfg.min_support_px || ok < cfg.min_members {
+            deferred.push(i);
             continue;
         }
-        for &m in &hyps[i].members {
+        accept(i, &mut claims, &mut accepted);
+    }
+    // A hypothesis whose segments all belong to other planes already is still a plane of its
+    // own when no single accepted plane holds most of them: a face whose every edge is shared
+    // (two creases, and silhouette edges that also lie on the table plane).
+    let mut rest: Vec<(f64, usize)> = deferred
+        .into_iter()
+        .map(|i| {
+            let total: f64 = hyps[i].members.iter().map(|&m| info(&hyps[i], m)).filter(|x| status(&claims, x.0, x.1, x.2) != 2).map(|x| x.3).sum();
+            (total, i)
+        })
+        .collect();
+    rest.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for (_, i) in rest {
+        let ok: Vec<u32> = hyps[i].members.iter().copied().filter(|&m| {
             let (l, r, cov, _) = info(&hyps[i], m);
-            if status(&claims, l, r, cov) == 0 {
-                claims[l].push(Claim { right: r, stretch: cov });
-            }
+            status(&claims, l, r, cov) != 2
+        }).collect();
+        let total: f64 = ok.iter().map(|&m| info(&hyps[i], m).3).sum();
+        if ok.len() < cfg.min_members || total < cfg.min_support_px {
+            continue;
         }
-        accepted.push(i);
+        let most_in_one = accepted.iter().map(|&a| ok.iter().filter(|m| hyps[a].members.contains(m)).count()).max().unwrap_or(0);
+        if (most_in_one as f64) < 0.6 * ok.len() as f64 {
+            accept(i, &mut claims, &mut accepted);
+        }
     }
     // Final membership: every accepted plane takes all claimed supporters, then refits.
     let all: Vec<u32> = (0..inp.cands.list.len() as u32)

@@ -17,7 +17,7 @@ use super::segments::Segment;
 pub struct RelationConfig {
     /// Largest distance from a segment end to the junction point, pixels. Lines meeting at
     /// a small angle interfere over a longer stretch near their corner (their edges blur into
-    /// each other), so the allowance grows as `junction_gap_px · 0.5 / sin(angle)` there, up
+    /// each other), so the allowance grows as `junction_gap_px · 0.7 / sin(angle)` there, up
     /// to 2.5x.
     pub junction_gap_px: f64,
     /// Smallest angle between the two lines of a junction, degrees.
@@ -211,7 +211,7 @@ pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &R
                 if sin < min_sin {
                     continue;
                 }
-                let gap = (gap * 0.5 / sin).clamp(gap, 2.5 * gap);
+                let gap = (gap * 0.7 / sin).clamp(gap, 2.5 * gap);
                 let Some((x, s, t)) = geom::intersect_lines(a.p0, da, b.p0, db) else { continue };
                 let s_end = if end == End::P0 { 0.0 } else { a.length() };
                 if (s - s_end).abs() > gap {
