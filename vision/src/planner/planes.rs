@@ -13,9 +13,11 @@
 //! Chains of two friendships (three segments meeting at two junctions), then single
 //! friendships, seed hypotheses; each grows by alternating support (candidates whose
 //! transferred left segment lies on the right segment within `line_tol_px` and overlaps it)
-//! and least-squares refits, first near the seed, then over the whole image. A seed whose two
-//! candidates are both members of one grown hypothesis is skipped (it would grow the same
-//! plane again), which keeps the work near-linear in practice.
+//! and least-squares refits, within a region that starts around the seed and follows the
+//! members (a plane is grown locally: a global model also collects far-away edges that run
+//! along the epipolar lines and fit any plane). A seed whose candidates are all members of
+//! one grown hypothesis is skipped (it would grow the same plane again), which keeps the work
+//! near-linear in practice.
 //! Hypothesis selection is greedy: the plane with the most newly explained segment length is
 //! accepted, its matches fix their left segments' correspondences (a segment on a crease may
 //! still belong to several planes, with the same match), and the remaining hypotheses are
@@ -91,7 +93,8 @@ pub struct PlaneConfig {
     pub line_tol_px: f64,
     /// Weight of the (weak) epipolar rows relative to the line rows.
     pub epipolar_weight: f64,
-    /// Radius around a seed's junction within which it first grows, pixels.
+    /// Radius around a seed's junction within which it first grows (then around its
+    /// members' bounding box, by half this), pixels.
     pub seed_radius_px: f64,
     /// Fewest member segments of an accepted plane.
     pub min_members: usize,
@@ -217,6 +220,8 @@ struct Hypothesis {
     transfer: Transfer,
     /// Candidate indices, one per left segment.
     members: Vec<u32>,
+    /// The candidates of the region it was grown in.
+    pool: Vec<u32>,
 }
 
 /// Grows hypotheses from the friends and selects planes (see the module docs).
@@ -259,7 +264,6 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
     let mut grid = SegmentGrid::build(inp.left, inp.width, inp.height, 32.0);
     let mut near = Vec::new();
     let mut local = Vec::new();
-    let all: Vec<u32> = (0..n as u32).collect();
     let mut scratch = vec![false; n];
     // The grown hypotheses each candidate belongs to: a seed whose candidates already all
     // share one would only grow that hypothesis again.
@@ -287,43 +291,47 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         if !plausible(&t, cfg) || !cs.iter().all(|&c| supports(&t, inp, c, cfg)) || !epipolar_consistent(&t, inp, &cs) {
             continue;
         }
-        // Local growth.
+        // Growth: support within a region that starts around the seed and then follows the
+        // members (planes are grown locally: a global plane model would also collect the
+        // accidental coplanarities of far-away edges).
         let r = cfg.seed_radius_px;
-        grid.query([p[0] - r, p[1] - r], [p[0] + r, p[1] + r], &mut near);
-        local.clear();
-        for &l in &near {
-            local.extend(inp.cands.of_left(l).map(|c| c as u32));
-        }
+        let (mut lo, mut hi) = ([p[0] - r, p[1] - r], [p[0] + r, p[1] + r]);
         let mut members = Vec::new();
-        for _ in 0..3 {
+        for round in 0..4 {
+            grid.query(lo, hi, &mut near);
+            local.clear();
+            for &l in &near {
+                local.extend(inp.cands.of_left(l).map(|c| c as u32));
+            }
             members = support(&t, inp, &local, cfg);
-            if members.len() < 2 {
+            if members.len() < 2 || round == 3 {
                 break;
             }
             match refit(inp, &members, &adj, &mut scratch, cfg, p) {
                 Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
                 _ => break,
             }
-        }
-        if members.len() < cfg.min_members {
-            continue;
-        }
-        // Global growth.
-        for _ in 0..2 {
-            members = support(&t, inp, &all, cfg);
-            match refit(inp, &members, &adj, &mut scratch, cfg, p) {
-                Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
-                _ => break,
+            if round >= 1 {
+                // Follow the members: their bounding box plus half the radius.
+                let (mut a, mut b) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for &m in &members {
+                    let l = &inp.left[inp.cands.list[m as usize].left as usize];
+                    for q in [l.p0, l.p1] {
+                        a = [a[0].min(q[0]), a[1].min(q[1])];
+                        b = [b[0].max(q[0]), b[1].max(q[1])];
+                    }
+                }
+                lo = [a[0] - 0.5 * r, a[1] - 0.5 * r];
+                hi = [b[0] + 0.5 * r, b[1] + 0.5 * r];
             }
         }
-        members = support(&t, inp, &all, cfg);
         if members.len() < cfg.min_members {
             continue;
         }
         for &m in &members {
             member_of[m as usize].push(hyps.len() as u32);
         }
-        hyps.push(Hypothesis { transfer: t, members });
+        hyps.push(Hypothesis { transfer: t, members, pool: local.clone() });
     }
     select(inp, hyps, &adj, cfg)
 }
@@ -534,15 +542,15 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, adj: &[Vec<u32>], cfg: &Plane
             accept(i, &mut claims, &mut accepted);
         }
     }
-    // Final membership: every accepted plane takes all claimed supporters, then refits.
-    let all: Vec<u32> = (0..inp.cands.list.len() as u32)
-        .filter(|&ci| {
-            let c = &inp.cands.list[ci as usize];
-            claims[c.left as usize].iter().any(|k| k.right == c.right)
-        })
-        .collect();
+    // Final membership: every accepted plane takes the claimed supporters of its region,
+    // then refits.
+    let claimed = |ci: &u32| {
+        let c = &inp.cands.list[*ci as usize];
+        claims[c.left as usize].iter().any(|k| k.right == c.right)
+    };
     let mut planes = Vec::new();
     for i in accepted {
+        let all: Vec<u32> = hyps[i].pool.iter().copied().filter(claimed).collect();
         let mut t = hyps[i].transfer;
         let mut members = support(&t, inp, &all, cfg);
         if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint()) {
