@@ -1,7 +1,8 @@
 //! From planes to facets (thesis 5.5.4, 5.6.1-5.6.2).
 //!
 //! Each plane's matched segments are split into connected components by the junction relation
-//! (and collinearity, which rejoins an edge broken by texture); each component's convex hull
+//! (L and Y junctions seen in both views — friends: a T, or a junction that exists in one
+//! view only, is an occlusion joining surfaces of different objects) and collinearity (which rejoins an edge broken by texture); each component's convex hull
 //! is formed in the cyclopean image (`(x + x')/2`), and components whose hulls intersect are
 //! merged into one facet. Groups without any junction-connected core are isolated, accidental
 //! coplanarities and are not facets.
@@ -13,10 +14,10 @@
 //! first extended to their junction points, so the polygon's corners are the line
 //! intersections rather than the rounded, truncated ends of the segments.
 
-use std::collections::VecDeque;
+use std::collections::{HashSet, VecDeque};
 
 use super::geom::{self, P2};
-use super::matching::{Candidates, EpipolarFrame};
+use super::matching::{Candidates, EpipolarFrame, Friendship};
 use super::planes::{Plane, Transfer, TransferFit};
 use super::reconstruct::union_by_transfer;
 use super::relations::{End, JunctionKind, Relations};
@@ -56,8 +57,8 @@ pub struct Facet {
     /// Boundary polygon in the left and right view (same vertex order).
     pub left: Vec<P2>,
     pub right: Vec<P2>,
-    /// Connected component (object) id: facets sharing a segment or joined by a junction
-    /// have the same id.
+    /// Connected component (object) id: facets sharing a segment or joined by an L or Y
+    /// junction have the same id.
     pub component: u32,
 }
 
@@ -68,6 +69,7 @@ pub struct FacetInput<'a> {
     pub cands: &'a Candidates,
     pub planes: &'a [Plane],
     pub rel_left: &'a Relations,
+    pub friends: &'a [Friendship],
     pub epipolar: &'a EpipolarFrame,
 }
 
@@ -95,6 +97,11 @@ impl UnionFind {
 
 /// Forms the facets of all planes.
 pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
+    // Junctions count only when they are seen in both views (friends): a junction that is an
+    // accident of one viewpoint (an edge ending where another object's corner hides it) has
+    // no consistent partner in the other view.
+    let friends: HashSet<(u32, u32)> = inp.friends.iter().map(|f| (f.a, f.b)).collect();
+    let friendly = |a: u32, b: u32| friends.contains(&(a.min(b), a.max(b)));
     let mut facets = Vec::new();
     // Position of each left segment in the current plane's member list.
     let mut slot = vec![usize::MAX; inp.left.len()];
@@ -105,9 +112,10 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
         }
         let mut uf = UnionFind::new(members.len());
         let mut connected = vec![false; members.len()];
-        for j in &inp.rel_left.junctions {
+        // L and Y junctions only: a T is where one surface occludes another.
+        for j in inp.rel_left.junctions.iter().filter(|j| j.kind != JunctionKind::T) {
             let (a, b) = (slot[j.a as usize], slot[j.b as usize]);
-            if a != usize::MAX && b != usize::MAX {
+            if a != usize::MAX && b != usize::MAX && friendly(members[a], members[b]) {
                 uf.union(a, b);
                 connected[a] = true;
                 connected[b] = true;
@@ -120,7 +128,7 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             }
         }
         // Components and their cyclopean hulls.
-        let ends: Vec<[P2; 2]> = members.iter().map(|&m| extended_ends(inp, &plane.transfer, m, &slot)).collect();
+        let ends: Vec<[P2; 2]> = members.iter().map(|&m| extended_ends(inp, &plane.transfer, m, &slot, members, &friendly)).collect();
         let mut groups: Vec<Vec<usize>> = Vec::new();
         let mut root_group = vec![usize::MAX; members.len()];
         for k in 0..members.len() {
@@ -168,7 +176,7 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             let fm: Vec<u32> = g.iter().map(|&k| members[k]).collect();
             let transfer = refit(inp, &fm, cfg).unwrap_or(plane.transfer);
             // Recompute ends with the facet's own transfer, then the boundary.
-            let fends: Vec<[P2; 2]> = fm.iter().map(|&m| extended_ends(inp, &transfer, m, &slot)).collect();
+            let fends: Vec<[P2; 2]> = fm.iter().map(|&m| extended_ends(inp, &transfer, m, &slot, members, &friendly)).collect();
             let cyc: Vec<[P2; 2]> = fends.iter().map(|e| [transfer.cyclopean(e[0]), transfer.cyclopean(e[1])]).collect();
             let boundary = modified_hull(&cyc, cfg.bridge_max_edges);
             let left: Vec<P2> = boundary.iter().filter_map(|&c| transfer.from_cyclopean(c)).collect();
@@ -182,21 +190,22 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             slot[inp.cands.list[m as usize].left as usize] = usize::MAX;
         }
     }
-    assign_components(inp, &mut facets);
+    assign_components(inp, &mut facets, &friendly);
     facets
 }
 
 /// The left segment of candidate `m`, extended to the union of its own extent and its
 /// match's (transferred back; see [`union_by_transfer`]), then to its junction points with
 /// fellow members.
-fn extended_ends(inp: &FacetInput, t: &Transfer, m: u32, slot: &[usize]) -> [P2; 2] {
+fn extended_ends(inp: &FacetInput, t: &Transfer, m: u32, slot: &[usize], members: &[u32], friendly: &dyn Fn(u32, u32) -> bool) -> [P2; 2] {
     let c = &inp.cands.list[m as usize];
     let (l, r) = (&inp.left[c.left as usize], &inp.right[c.right as usize]);
     let (mut e, _) = union_by_transfer(t, l, r);
     for &ji in inp.rel_left.junctions_of(c.left) {
         let j = &inp.rel_left.junctions[ji as usize];
         let (other, _) = j.other(c.left);
-        if slot[other as usize] == usize::MAX || j.kind == JunctionKind::T && j.end_of(c.left) == End::Interior {
+        let k = slot[other as usize];
+        if k == usize::MAX || !friendly(m, members[k]) {
             continue;
         }
         match j.end_of(c.left) {
@@ -348,24 +357,28 @@ fn segments_cross(a: P2, b: P2, c: P2, d: P2) -> bool {
     (d1 * d2 < 0.0) && (d3 * d4 < 0.0)
 }
 
-/// Connected component ids: facets sharing a left segment or joined by a left junction.
-fn assign_components(inp: &FacetInput, facets: &mut [Facet]) {
-    let mut owner: Vec<Vec<usize>> = vec![Vec::new(); inp.left.len()];
+/// Connected component ids: facets sharing a left segment or joined by a junction seen in both
+/// views.
+fn assign_components(inp: &FacetInput, facets: &mut [Facet], friendly: &dyn Fn(u32, u32) -> bool) {
+    // Per left segment: (facet, candidate) of the facets it belongs to.
+    let mut owner: Vec<Vec<(usize, u32)>> = vec![Vec::new(); inp.left.len()];
     for (fi, f) in facets.iter().enumerate() {
         for &m in &f.members {
-            owner[inp.cands.list[m as usize].left as usize].push(fi);
+            owner[inp.cands.list[m as usize].left as usize].push((fi, m));
         }
     }
     let mut uf = UnionFind::new(facets.len());
     for o in &owner {
         for w in o.windows(2) {
-            uf.union(w[0], w[1]);
+            uf.union(w[0].0, w[1].0);
         }
     }
-    for j in &inp.rel_left.junctions {
-        for &fa in &owner[j.a as usize] {
-            for &fb in &owner[j.b as usize] {
-                uf.union(fa, fb);
+    for j in inp.rel_left.junctions.iter().filter(|j| j.kind != JunctionKind::T) {
+        for &(fa, ma) in &owner[j.a as usize] {
+            for &(fb, mb) in &owner[j.b as usize] {
+                if friendly(ma, mb) {
+                    uf.union(fa, fb);
+                }
             }
         }
     }

@@ -222,7 +222,7 @@ impl Planner {
         let ef = EpipolarFrame::new(&geo_used.epipolar);
         let mut matches = reconstruct::select_matches(&cands, &friends, &planes, &ls, &rs);
         let facets = facets::find_facets(
-            &FacetInput { left: &ls, right: &rs, cands: &cands, planes: &planes, rel_left: &rl, epipolar: &ef },
+            &FacetInput { left: &ls, right: &rs, cands: &cands, planes: &planes, rel_left: &rl, friends: &friends, epipolar: &ef },
             &cfg.facets,
         );
         on_stage(Stage::Facets);

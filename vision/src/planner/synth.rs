@@ -243,15 +243,20 @@ pub struct StereoPair {
 }
 
 impl StereoPair {
-    /// The ground truth in the scorer's form.
+    /// The ground truth in the scorer's form. The scorer compares facets with *visible*
+    /// polygons; this renderer only knows the full projection of each face, so a face partly
+    /// hidden by another box (less than 97% of its area visible in a view) is reported with
+    /// zero visible area there, which keeps it out of the found/missed count (it still counts
+    /// against spurious facets).
     pub fn truth(&self) -> Vec<super::score::TruthFace> {
+        let shown = |vis: usize, area: f64| if vis as f64 >= 0.97 * area { vis as f64 } else { 0.0 };
         self.faces
             .iter()
             .map(|f| super::score::TruthFace {
                 left: f.left.clone(),
                 right: f.right.clone(),
-                visible_left_px: f.visible_left_px as f64,
-                visible_right_px: f.visible_right_px as f64,
+                visible_left_px: shown(f.visible_left_px, f.area_left_px),
+                visible_right_px: shown(f.visible_right_px, f.area_right_px),
                 corners_m: Some(f.corners_m.clone()),
             })
             .collect()
