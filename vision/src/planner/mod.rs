@@ -63,6 +63,9 @@ pub struct PlannerConfig {
     /// Rounds of re-fitting the epipolar constraint from matched junctions and matching
     /// again (0 disables the bootstrap).
     pub bootstrap_rounds: usize,
+    /// When the first matching yields too few junctions to refit the constraint, match once
+    /// more with the epipolar tolerance widened by this factor, only to refit it (1 disables).
+    pub bootstrap_widen: f64,
     /// Segments closer than this to the epipolar lines (in either view) cannot be
     /// reconstructed from the epipolar constraint alone, degrees.
     pub epipolar_min_angle_deg: f64,
@@ -78,6 +81,7 @@ impl Default for PlannerConfig {
             planes: PlaneConfig::default(),
             facets: FacetConfig::default(),
             bootstrap_rounds: 1,
+            bootstrap_widen: 2.0,
             epipolar_min_angle_deg: 10.0,
         }
     }
@@ -200,9 +204,18 @@ impl Planner {
         on_stage(Stage::Planes);
 
         let mut bootstrap = None;
-        for _ in 0..cfg.bootstrap_rounds {
-            let Some((refit, report)) = refit_epipolar(&friends, &planes, &geo_used.epipolar) else { break };
-            let mut report = report;
+        for round in 0..cfg.bootstrap_rounds {
+            let mut refitted = refit_epipolar(&friends, &planes, &geo_used.epipolar);
+            if refitted.is_none() && round == 0 && cfg.bootstrap_widen > 1.0 {
+                // Too few consistent junctions: perhaps the constraint is off by more than the
+                // tolerance. Match once with a wider tolerance just to refit it.
+                let mut wide = cfg;
+                wide.matching.epipolar_tol_px *= cfg.bootstrap_widen;
+                let (c, f) = match_views(&ls, &rs, &rl, &rr, &geo_used, &wide);
+                let p = group_planes(&ls, &rs, &c, &f, &geo_used, left, &wide);
+                refitted = refit_epipolar(&f, &p, &geo_used.epipolar);
+            }
+            let Some((refit, mut report)) = refitted else { break };
             // Re-match only when the constraint was noticeably off.
             if report.rms_before_px > 0.5 && report.rms_after_px < report.rms_before_px * 0.7 {
                 geo_used.epipolar = refit;
@@ -290,7 +303,7 @@ fn refit_epipolar(friends: &[Friendship], planes: &[Plane], current: &EpipolarCo
     }
     pts.sort_by(|a, b| a.iter().zip(b).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal));
     pts.dedup_by(|a, b| a.iter().zip(b.iter()).all(|(x, y)| (x - y).abs() < 0.5));
-    if pts.len() < 8 || seen_planes.len() < 2 || !spans_depth(&pts) {
+    if pts.len() < 6 || seen_planes.len() < 2 || !spans_depth(&pts) {
         return None;
     }
     let rms = |e: &EpipolarConstraint, pts: &[[f64; 4]]| {
@@ -304,7 +317,7 @@ fn refit_epipolar(friends: &[Friendship], planes: &[Plane], current: &EpipolarCo
     sorted.sort_by(f64::total_cmp);
     let cut = (3.0 * sorted[sorted.len() / 2]).max(0.3);
     let kept: Vec<[f64; 4]> = pts.iter().zip(res.drain(..)).filter(|(_, r)| *r <= cut).map(|(p, _)| *p).collect();
-    if kept.len() < 8 || !spans_depth(&kept) {
+    if kept.len() < 6 || !spans_depth(&kept) {
         return None;
     }
     let refit = EpipolarConstraint::fit(&kept).ok()?;
