@@ -289,12 +289,15 @@ mod tests {
     #[test]
     fn union_of_truncated_images_under_a_transfer() {
         let t = Transfer { a: [[1.0, 0.0], [0.0, 1.0]], b: [-10.0, 0.0] };
-        // Left sees x in [100, 150], right sees [95, 170] − 10 shifted: union [95, 170].
+        // Left sees x in [100, 150]; the right view (shifted by −10) sees [95, 170]. The 5 px
+        // at the start are within the cap and kept; the 20 px at the end exceed the cap
+        // (15% of the shorter, 7.5 px) and are cut there.
         let l = seg([100.0, 50.0], [150.0, 50.0]);
         let r = seg([85.0, 50.0], [160.0, 50.0]);
         let (xl, xr) = union_by_transfer(&t, &l, &r);
-        assert!(geom::dist(xl[0], [95.0, 50.0]) < 1e-9 && geom::dist(xl[1], [170.0, 50.0]) < 1e-9);
-        assert!(geom::dist(xr[0], [85.0, 50.0]) < 1e-9 && geom::dist(xr[1], [160.0, 50.0]) < 1e-9);
+        assert!(geom::dist(xl[0], [95.0, 50.0]) < 1e-9, "{xl:?}");
+        assert!(geom::dist(xl[1], [157.5, 50.0]) < 1e-9, "{xl:?}");
+        assert!(geom::dist(xr[0], [85.0, 50.0]) < 1e-9 && geom::dist(xr[1], [147.5, 50.0]) < 1e-9);
     }
 
     #[test]
