@@ -4,8 +4,10 @@
 //! (L and Y junctions seen in both views — friends: a T, or a junction that exists in one
 //! view only, is an occlusion joining surfaces of different objects) and collinearity (which rejoins an edge broken by texture); each component's convex hull
 //! is formed in the cyclopean image (`(x + x')/2`), and components whose hulls intersect are
-//! merged into one facet. Groups without any junction-connected core are isolated, accidental
-//! coplanarities and are not facets.
+//! merged into one facet. Only *cores* (two or more junction-connected segments) merge that
+//! way; another segment joins a facet when it touches its hull and meets a member at a
+//! junction in the left view, or lies inside the hull; otherwise it is an accidental
+//! coplanarity, as are groups without any core: they are not facets.
 //!
 //! A facet's boundary is the *modified convex hull*: every hull edge that is not a physical
 //! edge, but whose ends lie on the facet's connected edges, is replaced by the chain of
@@ -112,9 +114,15 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
         }
         let mut uf = UnionFind::new(members.len());
         let mut connected = vec![false; members.len()];
+        // Joined to a fellow member by an L or Y junction in the left view only.
+        let mut touching = vec![false; members.len()];
         // L and Y junctions only: a T is where one surface occludes another.
         for j in inp.rel_left.junctions.iter().filter(|j| j.kind != JunctionKind::T) {
             let (a, b) = (slot[j.a as usize], slot[j.b as usize]);
+            if a != usize::MAX && b != usize::MAX {
+                touching[a] = true;
+                touching[b] = true;
+            }
             if a != usize::MAX && b != usize::MAX && friendly(members[a], members[b]) {
                 uf.union(a, b);
                 connected[a] = true;
@@ -144,8 +152,14 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             geom::convex_hull(&pts).into_iter().map(|i| pts[i]).collect()
         };
         let mut hulls: Vec<Vec<P2>> = groups.iter().map(|g| hull_of(g)).collect();
-        // Merge intersecting hulls until stable.
-        let mut alive = vec![true; groups.len()];
+        // Cores: components of two or more segments joined by junctions seen in both views.
+        // Cores merge when their hulls intersect. Any other segment joins a core when its
+        // hull touches the core's and it forms a junction with a fellow member in the left
+        // view (an edge whose corner the right view did not show), or when it lies inside
+        // the core's hull (texture on the face); otherwise it is an accidental coplanarity
+        // and must not stretch the facet over a neighbouring surface.
+        let core: Vec<bool> = groups.iter().map(|g| g.len() >= 2 && g.iter().any(|&k| connected[k])).collect();
+        let mut alive = core.clone();
         loop {
             let mut merged = false;
             for i in 0..groups.len() {
@@ -164,6 +178,20 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             }
             if !merged {
                 break;
+            }
+        }
+        for j in 0..groups.len() {
+            if core[j] {
+                continue;
+            }
+            let pts: Vec<P2> = groups[j].iter().flat_map(|&k| ends[k]).map(|p| plane.transfer.cyclopean(p)).collect();
+            let loose = groups[j].iter().any(|&k| touching[k]);
+            let joins = |i: usize| {
+                alive[i] && if loose { geom::convex_intersect(&hulls[i], &hulls[j], cfg.touch_px) } else { pts.iter().all(|&p| geom::contains(&hulls[i], p, cfg.touch_px)) }
+            };
+            if let Some(i) = (0..groups.len()).find(|&i| joins(i)) {
+                let gj = std::mem::take(&mut groups[j]);
+                groups[i].extend(gj);
             }
         }
         for (gi, g) in groups.iter().enumerate() {

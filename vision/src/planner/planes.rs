@@ -102,6 +102,9 @@ pub struct PlaneConfig {
     pub min_support_px: f64,
     /// Most seeds tried (best first).
     pub max_seeds: usize,
+    /// Segments within this angle of the epipolar lines (in either view) support a plane only
+    /// through a junction point it transfers correctly, degrees.
+    pub weak_angle_deg: f64,
     /// Largest singular value ratio of `A` accepted (a plane seen at grazing angle in one view
     /// has a very anisotropic transfer; beyond this it is a bad fit).
     pub max_anisotropy: f64,
@@ -109,7 +112,7 @@ pub struct PlaneConfig {
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { line_tol_px: 1.2, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, max_anisotropy: 4.0 }
+        Self { line_tol_px: 1.2, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0 }
     }
 }
 
@@ -216,6 +219,14 @@ pub struct PlaneInput<'a> {
     pub height: usize,
 }
 
+/// Per-candidate context of plane grouping.
+struct Ctx {
+    /// Friendships of each candidate.
+    adj: Vec<Vec<u32>>,
+    /// Whether a candidate runs near the epipolar lines in either view.
+    weak: Vec<bool>,
+}
+
 struct Hypothesis {
     transfer: Transfer,
     /// Candidate indices, one per left segment.
@@ -237,6 +248,16 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         adj[f.a as usize].push(k as u32);
         adj[f.b as usize].push(k as u32);
     }
+    let sin_weak = cfg.weak_angle_deg.to_radians().sin();
+    let (el, er) = (inp.epipolar.left_dir(), inp.epipolar.right_dir());
+    let weak = inp
+        .cands
+        .list
+        .iter()
+        .map(|c| geom::cross(inp.left[c.left as usize].dir(), el).abs() < sin_weak || geom::cross(inp.right[c.right as usize].dir(), er).abs() < sin_weak)
+        .collect();
+    let ctx = Ctx { adj, weak };
+    let adj = &ctx.adj;
     // Seeds: chains of two friendships (three segments, two junctions: the transfer is fully
     // determined even when the middle segment runs along the epipolar lines), then single
     // friendships; heaviest first within each kind.
@@ -303,11 +324,11 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
             for &l in &near {
                 local.extend(inp.cands.of_left(l).map(|c| c as u32));
             }
-            members = support(&t, inp, &local, cfg);
+            members = support(&t, inp, &ctx, &local, cfg);
             if members.len() < 2 || round == 3 {
                 break;
             }
-            match refit(inp, &members, &adj, &mut scratch, cfg, p) {
+            match refit(inp, &members, adj, &mut scratch, cfg, p) {
                 Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
                 _ => break,
             }
@@ -333,7 +354,7 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         }
         hyps.push(Hypothesis { transfer: t, members, pool: local.clone() });
     }
-    select(inp, hyps, &adj, cfg)
+    select(inp, hyps, &ctx, cfg)
 }
 
 fn plausible(t: &Transfer, cfg: &PlaneConfig) -> bool {
@@ -374,15 +395,29 @@ pub fn stretches_overlap(a: (f64, f64), b: (f64, f64)) -> bool {
 /// Candidates among `pool` supporting `t`. A left segment normally has one; it has several
 /// only when they cover disjoint stretches of it (its right image is broken, or it is two
 /// edges that line up in the left view only).
-fn support(t: &Transfer, inp: &PlaneInput, pool: &[u32], cfg: &PlaneConfig) -> Vec<u32> {
+///
+/// A segment running within `weak_angle_deg` of the epipolar lines fits nearly any plane
+/// through the right line (parallax moves it along itself), so it supports `t` only through a
+/// junction with a friend whose point correspondence `t` also transfers correctly.
+fn support(t: &Transfer, inp: &PlaneInput, ctx: &Ctx, pool: &[u32], cfg: &PlaneConfig) -> Vec<u32> {
     let mut out: Vec<(u32, u32, f64)> = Vec::new();
     for &ci in pool {
         let c = &inp.cands.list[ci as usize];
         let (res, overlap) = line_residuals(t, &inp.left[c.left as usize], &inp.right[c.right as usize]);
         let worst = res[0].abs().max(res[1].abs());
-        if overlap && worst <= cfg.line_tol_px {
-            out.push((c.left, ci, worst));
+        if !overlap || worst > cfg.line_tol_px {
+            continue;
         }
+        if ctx.weak[ci as usize] {
+            let anchored = ctx.adj[ci as usize].iter().any(|&f| {
+                let f = &inp.friends[f as usize];
+                geom::dist(t.apply(f.left_point), f.right_point) <= 2.0 * cfg.line_tol_px
+            });
+            if !anchored {
+                continue;
+            }
+        }
+        out.push((c.left, ci, worst));
     }
     out.sort_by(|x, y| x.0.cmp(&y.0).then(x.2.total_cmp(&y.2)));
     let mut kept: Vec<u32> = Vec::with_capacity(out.len());
@@ -440,7 +475,8 @@ struct Claim {
 }
 
 /// Greedy hypothesis selection with lazy re-scoring.
-fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, adj: &[Vec<u32>], cfg: &PlaneConfig) -> Vec<Plane> {
+fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig) -> Vec<Plane> {
+    let adj = &ctx.adj;
     let mut scratch = vec![false; inp.cands.list.len()];
     let mut claims: Vec<Vec<Claim>> = vec![Vec::new(); inp.left.len()];
     // Per member: (left, right, stretch covered, matched length).
@@ -552,11 +588,11 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, adj: &[Vec<u32>], cfg: &Plane
     for i in accepted {
         let all: Vec<u32> = hyps[i].pool.iter().copied().filter(claimed).collect();
         let mut t = hyps[i].transfer;
-        let mut members = support(&t, inp, &all, cfg);
+        let mut members = support(&t, inp, ctx, &all, cfg);
         if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint()) {
             if let Some(t2) = refit(inp, &members, adj, &mut scratch, cfg, origin).filter(|t2| plausible(t2, cfg)) {
                 t = t2;
-                members = support(&t, inp, &all, cfg);
+                members = support(&t, inp, ctx, &all, cfg);
             }
         }
         if members.len() < cfg.min_members {

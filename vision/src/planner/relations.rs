@@ -20,6 +20,10 @@ pub struct RelationConfig {
     /// each other), so the allowance grows as `junction_gap_px · 0.7 / sin(angle)` there, up
     /// to 2.5x.
     pub junction_gap_px: f64,
+    /// The reach is at most this fraction of the shorter segment's length ...
+    pub junction_gap_rel: f64,
+    /// ... but never below this, pixels.
+    pub junction_gap_min_px: f64,
     /// Smallest angle between the two lines of a junction, degrees.
     pub junction_min_angle_deg: f64,
     /// Largest angle between collinear or parallel segments, degrees.
@@ -37,7 +41,9 @@ pub struct RelationConfig {
 impl Default for RelationConfig {
     fn default() -> Self {
         Self {
-            junction_gap_px: 6.0,
+            junction_gap_px: 8.0,
+            junction_gap_rel: 0.2,
+            junction_gap_min_px: 4.0,
             junction_min_angle_deg: 8.0,
             parallel_max_angle_deg: 3.0,
             collinear_max_offset_px: 1.5,
@@ -211,7 +217,9 @@ pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &R
                 if sin < min_sin {
                     continue;
                 }
-                let gap = (gap * 0.7 / sin).clamp(gap, 2.5 * gap);
+                // Short segments (texture) get a proportionally shorter reach.
+                let base = (cfg.junction_gap_rel * a.length().min(b.length())).clamp(cfg.junction_gap_min_px, gap);
+                let gap = (base * 0.7 / sin).clamp(base, 2.5 * base);
                 let Some((x, s, t)) = geom::intersect_lines(a.p0, da, b.p0, db) else { continue };
                 let s_end = if end == End::P0 { 0.0 } else { a.length() };
                 if (s - s_end).abs() > gap {
