@@ -218,6 +218,7 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             slot[inp.cands.list[m as usize].left as usize] = usize::MAX;
         }
     }
+    let mut facets = drop_duplicates(inp, facets);
     assign_components(inp, &mut facets, &friendly);
     facets
 }
@@ -383,6 +384,52 @@ fn segments_cross(a: P2, b: P2, c: P2, d: P2) -> bool {
     let o = |p: P2, q: P2, r: P2| geom::cross(geom::sub(q, p), geom::sub(r, p));
     let (d1, d2, d3, d4) = (o(c, d, a), o(c, d, b), o(a, b, c), o(a, b, d));
     (d1 * d2 < 0.0) && (d3 * d4 < 0.0)
+}
+
+/// The same group of segments can form a facet on two planes (two hypotheses that agree
+/// where the segments are but not elsewhere): keep the facet with more segments (or, equal,
+/// the better fitting transfer) and drop those whose left segments are mostly (3/4) its.
+fn drop_duplicates(inp: &FacetInput, mut facets: Vec<Facet>) -> Vec<Facet> {
+    let lefts = |f: &Facet| -> Vec<u32> {
+        let mut v: Vec<u32> = f.members.iter().map(|&m| inp.cands.list[m as usize].left).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    let rms = |f: &Facet| -> f64 {
+        let s: f64 = f
+            .members
+            .iter()
+            .map(|&m| {
+                let c = &inp.cands.list[m as usize];
+                let (r, _) = super::planes::line_residuals(&f.transfer, &inp.left[c.left as usize], &inp.right[c.right as usize]);
+                r[0] * r[0] + r[1] * r[1]
+            })
+            .sum();
+        s / f.members.len().max(1) as f64
+    };
+    let sets: Vec<Vec<u32>> = facets.iter().map(lefts).collect();
+    let fits: Vec<f64> = facets.iter().map(rms).collect();
+    let mut keep = vec![true; facets.len()];
+    for i in 0..facets.len() {
+        for j in 0..facets.len() {
+            if i == j || !keep[j] {
+                continue;
+            }
+            let better = (sets[j].len(), -fits[j]) > (sets[i].len(), -fits[i]) || ((sets[j].len(), -fits[j]) == (sets[i].len(), -fits[i]) && j < i);
+            let shared = sets[i].iter().filter(|s| sets[j].binary_search(s).is_ok()).count();
+            if better && 4 * shared >= 3 * sets[i].len() {
+                keep[i] = false;
+                break;
+            }
+        }
+    }
+    let mut k = 0;
+    facets.retain(|_| {
+        k += 1;
+        keep[k - 1]
+    });
+    facets
 }
 
 /// Connected component ids: facets sharing a left segment or joined by a junction seen in both

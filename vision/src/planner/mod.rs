@@ -336,7 +336,7 @@ fn spans_depth(pts: &[[f64; 4]]) -> bool {
     }
     let mut ev: Vec<f64> = s.symmetric_eigenvalues().iter().copied().collect();
     ev.sort_by(f64::total_cmp);
-    (ev[1] / n).sqrt() >= 2.0
+    (ev[1] / n).sqrt() >= 1.0
 }
 
 /// A polygon's vertices as plain `[u, v]` pairs (for output).

@@ -611,6 +611,41 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig)
         let rms_px = (sq / (2 * members.len()) as f64).sqrt();
         planes.push(Plane { transfer: t, members, support_px, rms_px });
     }
+    merge_duplicates(inp, planes, cfg)
+}
+
+/// Merges planes that are the same plane grown twice (from seeds far apart): their transfers
+/// agree, within the line tolerance, at the end points of both planes' segments.
+fn merge_duplicates(inp: &PlaneInput, mut planes: Vec<Plane>, cfg: &PlaneConfig) -> Vec<Plane> {
+    let ends = |p: &Plane| -> Vec<P2> {
+        p.members.iter().flat_map(|&m| {
+            let l = &inp.left[inp.cands.list[m as usize].left as usize];
+            [l.p0, l.p1]
+        }).collect()
+    };
+    let mut i = 0;
+    while i < planes.len() {
+        let mut j = i + 1;
+        while j < planes.len() {
+            let pts: Vec<P2> = ends(&planes[i]).into_iter().chain(ends(&planes[j])).collect();
+            let (ti, tj) = (planes[i].transfer, planes[j].transfer);
+            let same = pts.iter().all(|&x| geom::dist(ti.apply(x), tj.apply(x)) <= cfg.line_tol_px);
+            if same {
+                let pj = planes.remove(j);
+                let pi = &mut planes[i];
+                for m in pj.members {
+                    if !pi.members.contains(&m) {
+                        pi.members.push(m);
+                    }
+                }
+                pi.support_px += pj.support_px;
+                pi.rms_px = pi.rms_px.max(pj.rms_px);
+            } else {
+                j += 1;
+            }
+        }
+        i += 1;
+    }
     planes
 }
 
