@@ -100,16 +100,20 @@ pub fn run(args: PlanArgs) -> Result<()> {
     if let Some(out) = &args.overlay {
         write_overlay(out, &left, &right, &plan)?;
     }
-    if args.json {
-        let v = plan_json(&plan, &timings, &geo, source);
-        println!("{}", serde_json::to_string_pretty(&v)?);
+    let mut text = if args.json {
+        serde_json::to_string_pretty(&plan_json(&plan, &timings, &geo, source))? + "\n"
     } else {
-        print_summary(&plan, &timings, source);
-        if let Some(out) = &args.overlay {
-            println!("overlay written to {}", out.display());
-        }
+        summary(&plan, &timings, source)
+    };
+    if let (false, Some(out)) = (args.json, &args.overlay) {
+        text += &format!("overlay written to {}\n", out.display());
     }
-    Ok(())
+    // A closed pipe (`| head`) ends the output quietly rather than with a panic.
+    use std::io::Write;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
 }
 
 /// Runs the planner, returning per-stage times (milliseconds, stage name → time) and `total`.
@@ -310,9 +314,11 @@ pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &Stere
     })
 }
 
-fn print_summary(plan: &Plan, timings: &BTreeMap<&'static str, f64>, source: &str) {
-    println!("geometry: {source}");
-    println!(
+fn summary(plan: &Plan, timings: &BTreeMap<&'static str, f64>, source: &str) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "geometry: {source}");
+    let _ = writeln!(s, 
         "segments: {} left, {} right; candidates {}; friends {}; planes {}; matches {}; facets {}",
         plan.left_segments.len(),
         plan.right_segments.len(),
@@ -323,21 +329,22 @@ fn print_summary(plan: &Plan, timings: &BTreeMap<&'static str, f64>, source: &st
         plan.facets.len()
     );
     if let Some(b) = plan.bootstrap {
-        println!("epipolar bootstrap: {} junctions, rms {:.2} → {:.2} px{}", b.points, b.rms_before_px, b.rms_after_px, if b.rematched { ", re-matched" } else { "" });
+        let _ = writeln!(s, "epipolar bootstrap: {} junctions, rms {:.2} → {:.2} px{}", b.points, b.rms_before_px, b.rms_after_px, if b.rematched { ", re-matched" } else { "" });
     }
     for (i, f) in plan.facets.iter().enumerate() {
         let poly = |p: &[[f64; 2]]| p.iter().map(|q| format!("({:.1}, {:.1})", q[0], q[1])).collect::<Vec<_>>().join(" ");
-        println!("facet {i} (plane {}, object {}, {} edges)", f.facet.plane, f.facet.component, f.facet.members.len());
-        println!("  left:  {}", poly(&f.facet.left));
-        println!("  right: {}", poly(&f.facet.right));
+        let _ = writeln!(s, "facet {i} (plane {}, object {}, {} edges)", f.facet.plane, f.facet.component, f.facet.members.len());
+        let _ = writeln!(s, "  left:  {}", poly(&f.facet.left));
+        let _ = writeln!(s, "  right: {}", poly(&f.facet.right));
         if let Some(c) = &f.corners_robot_m {
-            println!("  corners (robot, mm): {}", c.iter().map(|x| format!("({:.1}, {:.1}, {:.1})", x[0] * 1e3, x[1] * 1e3, x[2] * 1e3)).collect::<Vec<_>>().join(" "));
+            let _ = writeln!(s, "  corners (robot, mm): {}", c.iter().map(|x| format!("({:.1}, {:.1}, {:.1})", x[0] * 1e3, x[1] * 1e3, x[2] * 1e3)).collect::<Vec<_>>().join(" "));
         }
     }
     let reconstructed = plan.matches.iter().filter(|m| m.reconstruction.is_some()).count();
-    println!("matched segments: {} ({} reconstructed)", plan.matches.len(), reconstructed);
+    let _ = writeln!(s, "matched segments: {} ({} reconstructed)", plan.matches.len(), reconstructed);
     let t: Vec<String> = timings.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
-    println!("timings (ms): {}", t.join(", "));
+    let _ = writeln!(s, "timings (ms): {}", t.join(", "));
+    s
 }
 
 /// Distinct, saturated colours for facets.
