@@ -25,6 +25,9 @@
 //! assert_eq!(plan.facets.len(), 3); // top and two sides
 //! ```
 
+
+// Index loops over parallel arrays (points, links, flags) read more plainly than zips here.
+#![allow(clippy::needless_range_loop)]
 pub mod edges;
 pub mod facets;
 pub mod geom;
@@ -294,12 +297,11 @@ fn refit_epipolar(friends: &[Friendship], planes: &[Plane], current: &EpipolarCo
     let mut pts: Vec<[f64; 4]> = Vec::new();
     let mut seen_planes = std::collections::HashSet::new();
     for f in friends {
-        if let (Some(pa), Some(pb)) = (plane_of.get(&f.a), plane_of.get(&f.b)) {
-            if pa == pb {
+        if let (Some(pa), Some(pb)) = (plane_of.get(&f.a), plane_of.get(&f.b))
+            && pa == pb {
                 seen_planes.insert(*pa);
                 pts.push([f.left_point[0], f.left_point[1], f.right_point[0], f.right_point[1]]);
             }
-        }
     }
     pts.sort_by(|a, b| a.iter().zip(b).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal));
     pts.dedup_by(|a, b| a.iter().zip(b.iter()).all(|(x, y)| (x - y).abs() < 0.5));

@@ -589,12 +589,11 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig)
         let all: Vec<u32> = hyps[i].pool.iter().copied().filter(claimed).collect();
         let mut t = hyps[i].transfer;
         let mut members = support(&t, inp, ctx, &all, cfg);
-        if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint()) {
-            if let Some(t2) = refit(inp, &members, adj, &mut scratch, cfg, origin).filter(|t2| plausible(t2, cfg)) {
+        if let Some(origin) = members.first().map(|&m| inp.left[inp.cands.list[m as usize].left as usize].midpoint())
+            && let Some(t2) = refit(inp, &members, adj, &mut scratch, cfg, origin).filter(|t2| plausible(t2, cfg)) {
                 t = t2;
                 members = support(&t, inp, ctx, &all, cfg);
             }
-        }
         if members.len() < cfg.min_members {
             continue;
         }

@@ -85,8 +85,8 @@ pub fn score_scene(facets: &[FacetPolygons], truth: &[TruthFace], cfg: &ScoreCon
                 best = FaceMatch { face: fi, facet: Some(k), iou_left: il, iou_right: ir, found: il >= cfg.min_iou && ir >= cfg.min_iou };
             }
         }
-        if let (true, Some(k)) = (best.found, best.facet) {
-            if let (Some(tc), Some(fc)) = (&t.corners_m, &facets[k].corners_m) {
+        if let (true, Some(k)) = (best.found, best.facet)
+            && let (Some(tc), Some(fc)) = (&t.corners_m, &facets[k].corners_m) {
                 for c in tc {
                     let d = fc.iter().map(|p| ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()).fold(f64::INFINITY, f64::min);
                     if d.is_finite() {
@@ -94,7 +94,6 @@ pub fn score_scene(facets: &[FacetPolygons], truth: &[TruthFace], cfg: &ScoreCon
                     }
                 }
             }
-        }
         faces.push(best);
     }
     let spurious = facets.iter().filter(|f| truth.iter().all(|t| iou(&f.left, &t.left) < cfg.spurious_iou)).count();
