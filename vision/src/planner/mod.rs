@@ -38,6 +38,7 @@ pub mod relations;
 pub mod score;
 pub mod segments;
 pub mod synth;
+pub mod transfer;
 
 use nalgebra::{Matrix4, Vector4};
 
@@ -45,7 +46,6 @@ use crate::affine::EpipolarConstraint;
 use crate::image::ImageView;
 use edges::{EdgeConfig, EdgeDetector};
 use facets::{Facet, FacetConfig, FacetInput};
-use geom::P2;
 use matching::{Candidates, EpipolarFrame, Friendship, MatchConfig};
 use planes::{Plane, PlaneConfig, PlaneInput};
 use reconstruct::Match;
@@ -339,9 +339,4 @@ fn spans_depth(pts: &[[f64; 4]]) -> bool {
     let mut ev: Vec<f64> = s.symmetric_eigenvalues().iter().copied().collect();
     ev.sort_by(f64::total_cmp);
     (ev[1] / n).sqrt() >= 1.0
-}
-
-/// A polygon's vertices as plain `[u, v]` pairs (for output).
-pub fn polygon(points: &[P2]) -> Vec<[f64; 2]> {
-    points.to_vec()
 }
