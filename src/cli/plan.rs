@@ -1,9 +1,406 @@
-use anyhow::{bail, Result};
+//! `handeye plan`: planar facets and matched edges from one stereo pair.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
 use clap::Args;
+use handeye_vision::affine::AffineStereo;
+use handeye_vision::image::ImageBuf;
+use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, StereoGeometry};
+use nalgebra::{Matrix4x3, Vector3, Vector4};
+use serde_json::{json, Value};
 
-#[derive(Args)]
-pub struct PlanArgs {}
+const PLAN_HELP: &str = "\
+Finds planar facets in a stereo pair (thesis chapter 5): sub-pixel edges, line segments,
+junctions, matches under a weak epipolar constraint, coplanar groups (left-to-right affine
+transfers), facets with concavity-bridging boundaries, and their 3-D corners.
 
-pub fn run(_args: PlanArgs) -> Result<()> {
-    bail!("'handeye plan' is not built yet (issue #6)")
+The stereo geometry comes either from a saved affine stereo model (--calib) or from point
+correspondences (--points), such as the simulator snapshot's cage.json: with robot
+coordinates the affine model is fitted and facet corners come out in robot coordinates
+(metres); without them only the epipolar constraint and the disparity limits are fitted.
+The epipolar constraint is then refined from matched junctions (--bootstrap-rounds).
+
+Image coordinates are continuous: pixel (i, j) covers [i, i+1) x [j, j+1).
+
+Examples:
+  handeye snapshot scenarios/pick_cube.toml --out snap
+  handeye plan --left snap/left.png --right snap/right.png --points snap/cage.json --overlay plan.png
+  handeye plan --left l.png --right r.png --calib calib.json --json > plan.json";
+
+/// Arguments of `handeye plan` (see `PLAN_HELP`).
+#[derive(Args, Debug)]
+#[command(after_long_help = PLAN_HELP)]
+pub struct PlanArgs {
+    /// Left view, PNG (any bit depth; converted to 8-bit grey).
+    #[arg(long, value_name = "PNG")]
+    pub left: PathBuf,
+    /// Right view, PNG, same size as the left.
+    #[arg(long, value_name = "PNG")]
+    pub right: PathBuf,
+    /// Affine stereo model as saved by the daemon: JSON object with `m` (4 rows of 3:
+    /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels) and optionally
+    /// `disparity_range_px` ([lo, hi]) and `residual_rms_px`.
+    #[arg(long, value_name = "JSON", conflicts_with = "points", required_unless_present = "points")]
+    pub calib: Option<PathBuf>,
+    /// Point correspondences: a JSON list (or an object with a `points` or `cage` list) of
+    /// objects with `left` and `right` ([u, v] pixels) and optionally `robot_m` ([x, y, z]
+    /// metres); `left_px`/`right_px`/`robot` are accepted too. At least 4 points; robot
+    /// coordinates, when given for all, must not be coplanar.
+    #[arg(long, value_name = "JSON")]
+    pub points: Option<PathBuf>,
+    /// Print one JSON object (facets, matches, timings) instead of a summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Write both views side by side with the facets drawn in distinct colours (PNG).
+    #[arg(long, value_name = "PNG")]
+    pub overlay: Option<PathBuf>,
+    /// Tolerance of the weak epipolar constraint, pixels: how far a match may lie off its
+    /// epipolar line.
+    #[arg(long, default_value_t = 3.0, value_name = "PX")]
+    pub epipolar_tol_px: f64,
+    /// Widen the calibration's disparity range by this fraction of it on each side (objects
+    /// lie outside the calibration cage).
+    #[arg(long, default_value_t = 0.5, value_name = "FRACTION")]
+    pub disparity_margin: f64,
+    /// ... plus this many pixels on each side.
+    #[arg(long, default_value_t = 10.0, value_name = "PX")]
+    pub disparity_margin_px: f64,
+    /// Rounds of re-fitting the epipolar constraint from matched junctions (0: trust it).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub bootstrap_rounds: usize,
+}
+
+pub fn run(args: PlanArgs) -> Result<()> {
+    let left = load_gray(&args.left)?;
+    let right = load_gray(&args.right)?;
+    if (left.width, left.height) != (right.width, right.height) {
+        bail!(
+            "{} is {}x{} but {} is {}x{}: the views must be the same size",
+            args.left.display(),
+            left.width,
+            left.height,
+            args.right.display(),
+            right.width,
+            right.height
+        );
+    }
+    let (geo, source) = match (&args.calib, &args.points) {
+        (Some(c), _) => (StereoGeometry::from_model(load_calib(c)?, args.disparity_margin, args.disparity_margin_px), "calibration"),
+        (None, Some(p)) => geometry_from_points(&load_points(p)?, args.disparity_margin, args.disparity_margin_px, p)?,
+        (None, None) => bail!("give --calib or --points"),
+    };
+    let mut config = PlannerConfig::default();
+    config.matching.epipolar_tol_px = args.epipolar_tol_px;
+    config.bootstrap_rounds = args.bootstrap_rounds;
+    let mut planner = Planner::new(config);
+    let (plan, timings) = timed_plan(&mut planner, &left, &right, &geo);
+    if let Some(out) = &args.overlay {
+        write_overlay(out, &left, &right, &plan)?;
+    }
+    let mut text = if args.json {
+        serde_json::to_string_pretty(&plan_json(&plan, &timings, &geo, source))? + "\n"
+    } else {
+        summary(&plan, &timings, source)
+    };
+    if let (false, Some(out)) = (args.json, &args.overlay) {
+        text += &format!("overlay written to {}\n", out.display());
+    }
+    // A closed pipe (`| head`) ends the output quietly rather than with a panic.
+    use std::io::Write;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+/// Runs the planner, returning per-stage times (milliseconds, stage name → time) and `total`.
+pub fn timed_plan(planner: &mut Planner, left: &ImageBuf, right: &ImageBuf, geo: &StereoGeometry) -> (Plan, BTreeMap<&'static str, f64>) {
+    let mut timings: BTreeMap<&'static str, f64> = Stage::ALL.iter().map(|s| (s.name(), 0.0)).collect();
+    let start = Instant::now();
+    let mut last = start;
+    let plan = planner.plan_with(&left.view(), &right.view(), geo, &mut |stage| {
+        let now = Instant::now();
+        *timings.entry(stage.name()).or_insert(0.0) += (now - last).as_secs_f64() * 1e3;
+        last = now;
+    });
+    timings.insert("total", start.elapsed().as_secs_f64() * 1e3);
+    (plan, timings)
+}
+
+/// Loads a PNG as 8-bit grey.
+pub fn load_gray(path: &Path) -> Result<ImageBuf> {
+    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
+    let (w, h) = img.dimensions();
+    ImageBuf::from_vec(img.into_raw(), w as usize, h as usize).with_context(|| format!("image {} is empty", path.display()))
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not valid JSON", path.display()))
+}
+
+fn numbers(v: &Value, n: usize, path: &Path, field: &str) -> Result<Vec<f64>> {
+    let arr = v.as_array().with_context(|| format!("{}: field `{field}` must be a list of {n} numbers", path.display()))?;
+    if arr.len() != n {
+        bail!("{}: field `{field}` has {} numbers, expected {n}", path.display(), arr.len());
+    }
+    arr.iter()
+        .enumerate()
+        .map(|(i, x)| {
+            x.as_f64().filter(|f| f.is_finite()).with_context(|| format!("{}: field `{field}[{i}]` is not a finite number", path.display()))
+        })
+        .collect()
+}
+
+/// Loads an affine stereo model (see `--calib`).
+pub fn load_calib(path: &Path) -> Result<AffineStereo> {
+    let v = read_json(path)?;
+    let v = v.get("model").unwrap_or(&v);
+    let rows = v.get("m").with_context(|| format!("{}: missing field `m` (4 rows of 3 numbers)", path.display()))?;
+    let rows = rows.as_array().with_context(|| format!("{}: field `m` must be 4 rows of 3 numbers", path.display()))?;
+    if rows.len() != 4 {
+        bail!("{}: field `m` has {} rows, expected 4", path.display(), rows.len());
+    }
+    let mut m = Matrix4x3::zeros();
+    for (r, row) in rows.iter().enumerate() {
+        let row = numbers(row, 3, path, &format!("m[{r}]"))?;
+        for c in 0..3 {
+            m[(r, c)] = row[c];
+        }
+    }
+    let c = numbers(v.get("c").with_context(|| format!("{}: missing field `c` (4 numbers)", path.display()))?, 4, path, "c")?;
+    let c = Vector4::new(c[0], c[1], c[2], c[3]);
+    let residual_rms_px = v.get("residual_rms_px").and_then(Value::as_f64).unwrap_or(0.0);
+    let disparity_range_px = match v.get("disparity_range_px") {
+        Some(d) => {
+            let d = numbers(d, 2, path, "disparity_range_px")?;
+            [d[0].min(d[1]), d[0].max(d[1])]
+        }
+        None => bail!("{}: missing field `disparity_range_px` ([lo, hi] pixels of u' − u over the calibration)", path.display()),
+    };
+    let model = AffineStereo { m, c, residual_rms_px, disparity_range_px };
+    if (model.m.transpose() * model.m).try_inverse().is_none() {
+        bail!("{}: field `m` is singular (the cameras see no depth)", path.display());
+    }
+    Ok(model)
+}
+
+/// One correspondence: `(u, v, u', v')` and the robot point if known.
+pub type Correspondence = ([f64; 4], Option<[f64; 3]>);
+
+/// Loads correspondences (see `--points`).
+pub fn load_points(path: &Path) -> Result<Vec<Correspondence>> {
+    let v = read_json(path)?;
+    let list = if v.is_array() { &v } else { v.get("points").or_else(|| v.get("cage")).with_context(|| format!("{}: expected a list, or an object with a `points` or `cage` list", path.display()))? };
+    let list = list.as_array().with_context(|| format!("{}: `points` must be a list", path.display()))?;
+    let mut out = Vec::with_capacity(list.len());
+    for (i, p) in list.iter().enumerate() {
+        let get = |names: &[&str]| names.iter().find_map(|n| p.get(*n));
+        let l = get(&["left", "left_px"]).with_context(|| format!("{}: point {i} has no `left` ([u, v])", path.display()))?;
+        let r = get(&["right", "right_px"]).with_context(|| format!("{}: point {i} has no `right` ([u, v])", path.display()))?;
+        let l = numbers(l, 2, path, &format!("points[{i}].left"))?;
+        let r = numbers(r, 2, path, &format!("points[{i}].right"))?;
+        let robot = match get(&["robot_m", "robot", "xyz_m"]) {
+            Some(x) => {
+                let x = numbers(x, 3, path, &format!("points[{i}].robot_m"))?;
+                Some([x[0], x[1], x[2]])
+            }
+            None => None,
+        };
+        out.push(([l[0], l[1], r[0], r[1]], robot));
+    }
+    if out.len() < 4 {
+        bail!("{}: {} correspondences, need at least 4", path.display(), out.len());
+    }
+    Ok(out)
+}
+
+/// Stereo geometry from correspondences: the affine model when all have robot coordinates,
+/// else the epipolar constraint alone.
+pub fn geometry_from_points(points: &[Correspondence], margin: f64, margin_px: f64, path: &Path) -> Result<(StereoGeometry, &'static str)> {
+    let image: Vec<[f64; 4]> = points.iter().map(|p| p.0).collect();
+    if points.iter().all(|p| p.1.is_some()) {
+        let robot: Vec<Vector3<f64>> = points.iter().filter_map(|p| p.1).map(Vector3::from).collect();
+        let model = AffineStereo::fit(&robot, &image).with_context(|| format!("{}: cannot fit the affine stereo model", path.display()))?;
+        Ok((StereoGeometry::from_model(model, margin, margin_px), "points with robot coordinates (affine model)"))
+    } else {
+        let geo = StereoGeometry::from_correspondences(&image, margin, margin_px).with_context(|| format!("{}: cannot fit the epipolar constraint", path.display()))?;
+        Ok((geo, "image correspondences (epipolar constraint only)"))
+    }
+}
+
+fn r3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+fn pts(p: &[[f64; 2]]) -> Value {
+    Value::from(p.iter().map(|q| vec![r3(q[0]), r3(q[1])]).collect::<Vec<_>>())
+}
+
+fn pts3(p: &[[f64; 3]], scale: f64) -> Value {
+    Value::from(p.iter().map(|q| vec![(q[0] * scale).round() / scale, (q[1] * scale).round() / scale, (q[2] * scale).round() / scale]).collect::<Vec<_>>())
+}
+
+/// The `--json` object.
+pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &StereoGeometry, source: &str) -> Value {
+    let facets: Vec<Value> = plan
+        .facets
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let t = &f.facet.transfer;
+            let members: Vec<usize> = plan.matches.iter().enumerate().filter(|(_, m)| m.facets.contains(&(i as u32))).map(|(k, _)| k).collect();
+            let mut o = json!({
+                "id": i,
+                "plane": f.facet.plane,
+                "component": f.facet.component,
+                "left": pts(&f.facet.left),
+                "right": pts(&f.facet.right),
+                "transfer": { "a": [[t.a[0][0], t.a[0][1]], [t.a[1][0], t.a[1][1]]], "b": [t.b[0], t.b[1]] },
+                "matches": members,
+                "corners_cyclopean_disparity_px": pts3(&f.corners_cyclopean_disparity, 1e3),
+            });
+            if let Some(c) = &f.corners_robot_m {
+                o["corners_robot_m"] = pts3(c, 1e6);
+            }
+            o
+        })
+        .collect();
+    let matches: Vec<Value> = plan
+        .matches
+        .iter()
+        .map(|m| {
+            let (l, r) = (&plan.left_segments[m.left as usize], &plan.right_segments[m.right as usize]);
+            let mut o = json!({
+                "left": pts(&[l.p0, l.p1]),
+                "right": pts(&[r.p0, r.p1]),
+                "facets": m.facets,
+                "planes": m.planes,
+            });
+            if let Some(rec) = &m.reconstruction {
+                o["method"] = json!(rec.method.name());
+                o["ends_left"] = pts(&rec.left);
+                o["ends_right"] = pts(&rec.right);
+                o["ends_cyclopean_disparity_px"] = pts3(&rec.cyclopean_disparity, 1e3);
+                if let Some(x) = &rec.robot_m {
+                    o["ends_robot_m"] = pts3(x, 1e6);
+                }
+            } else {
+                o["method"] = json!("unreconstructed");
+            }
+            o
+        })
+        .collect();
+    let timings_ms: serde_json::Map<String, Value> = timings.iter().map(|(k, v)| (k.to_string(), json!((v * 1e3).round() / 1e3))).collect();
+    let e = &plan.epipolar;
+    json!({
+        "facets": facets,
+        "matches": matches,
+        "timings_ms": timings_ms,
+        "segments": { "left": plan.left_segments.len(), "right": plan.right_segments.len() },
+        "candidates": plan.candidates.list.len(),
+        "planes": plan.planes.len(),
+        "geometry": {
+            "source": source,
+            "calibrated": geo.model.is_some(),
+            "disparity_px": geo.disparity_px,
+            "epipolar_n": [e.n[0], e.n[1], e.n[2], e.n[3]],
+            "epipolar_n0": e.n0,
+        },
+        "bootstrap": plan.bootstrap.map(|b| json!({ "points": b.points, "rms_before_px": b.rms_before_px, "rms_after_px": b.rms_after_px, "rematched": b.rematched })),
+    })
+}
+
+fn summary(plan: &Plan, timings: &BTreeMap<&'static str, f64>, source: &str) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "geometry: {source}");
+    let _ = writeln!(s, 
+        "segments: {} left, {} right; candidates {}; friends {}; planes {}; matches {}; facets {}",
+        plan.left_segments.len(),
+        plan.right_segments.len(),
+        plan.candidates.list.len(),
+        plan.friends.len(),
+        plan.planes.len(),
+        plan.matches.len(),
+        plan.facets.len()
+    );
+    if let Some(b) = plan.bootstrap {
+        let _ = writeln!(s, "epipolar bootstrap: {} junctions, rms {:.2} → {:.2} px{}", b.points, b.rms_before_px, b.rms_after_px, if b.rematched { ", re-matched" } else { "" });
+    }
+    for (i, f) in plan.facets.iter().enumerate() {
+        let poly = |p: &[[f64; 2]]| p.iter().map(|q| format!("({:.1}, {:.1})", q[0], q[1])).collect::<Vec<_>>().join(" ");
+        let _ = writeln!(s, "facet {i} (plane {}, object {}, {} edges)", f.facet.plane, f.facet.component, f.facet.members.len());
+        let _ = writeln!(s, "  left:  {}", poly(&f.facet.left));
+        let _ = writeln!(s, "  right: {}", poly(&f.facet.right));
+        if let Some(c) = &f.corners_robot_m {
+            let _ = writeln!(s, "  corners (robot, mm): {}", c.iter().map(|x| format!("({:.1}, {:.1}, {:.1})", x[0] * 1e3, x[1] * 1e3, x[2] * 1e3)).collect::<Vec<_>>().join(" "));
+        }
+    }
+    let reconstructed = plan.matches.iter().filter(|m| m.reconstruction.is_some()).count();
+    let _ = writeln!(s, "matched segments: {} ({} reconstructed)", plan.matches.len(), reconstructed);
+    let t: Vec<String> = timings.iter().map(|(k, v)| format!("{k} {v:.2}")).collect();
+    let _ = writeln!(s, "timings (ms): {}", t.join(", "));
+    s
+}
+
+/// Distinct, saturated colours for facets.
+const PALETTE: [[u8; 3]; 10] = [
+    [230, 25, 75],
+    [60, 180, 75],
+    [0, 130, 200],
+    [245, 130, 48],
+    [145, 30, 180],
+    [70, 240, 240],
+    [240, 50, 230],
+    [210, 245, 60],
+    [255, 225, 25],
+    [0, 128, 128],
+];
+
+/// Draws a line of width ~2 px.
+fn draw_line(img: &mut image::RgbImage, a: [f64; 2], b: [f64; 2], dx: u32, col: [u8; 3], thick: bool) {
+    let n = (((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() * 2.0).ceil() as usize + 1;
+    for k in 0..=n {
+        let t = k as f64 / n as f64;
+        let (x, y) = (a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
+        let offsets: &[(f64, f64)] = if thick { &[(0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (-0.5, 0.0), (0.0, -0.5)] } else { &[(0.0, 0.0)] };
+        for (ox, oy) in offsets {
+            let (px, py) = ((x + ox).floor(), (y + oy).floor());
+            if px >= 0.0 && py >= 0.0 && (px as u32) < img.width() / 2 && (py as u32) < img.height() {
+                img.put_pixel(px as u32 + dx, py as u32, image::Rgb(col));
+            }
+        }
+    }
+}
+
+/// Writes both views side by side, matched segments in grey-white, facets in colour.
+pub fn write_overlay(path: &Path, left: &ImageBuf, right: &ImageBuf, plan: &Plan) -> Result<()> {
+    let (w, h) = (left.width as u32, left.height as u32);
+    let mut img = image::RgbImage::new(2 * w, h);
+    for (view, dx) in [(left, 0), (right, w)] {
+        for y in 0..h {
+            for x in 0..w {
+                let g = view.get(x as usize, y as usize) / 2 + 30;
+                img.put_pixel(x + dx, y, image::Rgb([g, g, g]));
+            }
+        }
+    }
+    for m in &plan.matches {
+        let (l, r) = (&plan.left_segments[m.left as usize], &plan.right_segments[m.right as usize]);
+        draw_line(&mut img, l.p0, l.p1, 0, [200, 200, 200], false);
+        draw_line(&mut img, r.p0, r.p1, w, [200, 200, 200], false);
+    }
+    for (i, f) in plan.facets.iter().enumerate() {
+        let col = PALETTE[i % PALETTE.len()];
+        for (poly, dx) in [(&f.facet.left, 0), (&f.facet.right, w)] {
+            for k in 0..poly.len() {
+                draw_line(&mut img, poly[k], poly[(k + 1) % poly.len()], dx, col, true);
+            }
+        }
+    }
+    img.save(path).with_context(|| format!("cannot write overlay {}", path.display()))
 }

@@ -8,3 +8,4 @@ pub mod locate;
 pub mod pointing;
 pub mod servo;
 pub mod tracker;
+pub mod planner;

@@ -39,6 +39,8 @@ pub struct TrackerConfig {
     pub passes: usize,
     /// Half-length of the refinement passes' search, pixels.
     pub refine_search_px: f64,
+    /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
+    pub refine_skip_px: f64,
     /// Edge polarity rule.
     pub edge_sign: EdgeSign,
     /// Weakest gradient accepted as an edge: central difference `I(k+1) − I(k−1)` in grey
@@ -68,6 +70,12 @@ pub struct TrackerConfig {
     pub min_edge_fraction: f64,
     /// Lost when fewer than this share of the points are inliers.
     pub min_inlier_fraction: f64,
+    /// Lost when the inliers pin the contour down this little in some direction (see
+    /// [`Confidence::direction_support`](super::Confidence::direction_support); 1 at best).
+    pub min_direction_support: f64,
+    /// Lost when the inlier share falls below this fraction of its recent average in one
+    /// update (the real `visp-cube` faces never drop below 0.9 of it).
+    pub min_inlier_ratio_to_recent: f64,
     /// Lost when the inliers' RMS residual exceeds this, px.
     pub max_residual_px: f64,
     /// Lost when the contour is squashed (ratio of the singular values of the deformation
@@ -105,6 +113,7 @@ impl Default for TrackerConfig {
             search_px: 10.0,
             passes: 2,
             refine_search_px: 4.0,
+            refine_skip_px: 0.0,
             edge_sign: EdgeSign::Either,
             min_contrast: 12,
             model: DeformationModel::Projective,
@@ -120,6 +129,8 @@ impl Default for TrackerConfig {
             min_edge_fraction: 0.3,
             min_inlier_fraction: 0.3,
             max_residual_px: 1.2,
+            min_direction_support: 0.35,
+            min_inlier_ratio_to_recent: 0.65,
             max_squash: 8.0,
             max_area_change: 25.0,
             velocity_gain: 0.5,
@@ -171,8 +182,11 @@ impl TrackerConfig {
         check(unit(self.min_edge_fraction), "min_edge_fraction", self.min_edge_fraction, "0..=1")?;
         check(unit(self.min_inlier_fraction), "min_inlier_fraction", self.min_inlier_fraction, "0..=1")?;
         check(self.max_residual_px > 0.0, "max_residual_px", self.max_residual_px, "> 0 px")?;
+        check(unit(self.min_direction_support), "min_direction_support", self.min_direction_support, "0..=1")?;
+        check(unit(self.min_inlier_ratio_to_recent), "min_inlier_ratio_to_recent", self.min_inlier_ratio_to_recent, "0..=1")?;
         check(self.max_squash >= 1.0, "max_squash", self.max_squash, ">= 1")?;
         check(self.max_area_change >= 1.0, "max_area_change", self.max_area_change, ">= 1")?;
+        check(self.refine_skip_px >= 0.0 && self.refine_skip_px.is_finite(), "refine_skip_px", self.refine_skip_px, ">= 0 px")?;
         check(unit(self.velocity_gain), "velocity_gain", self.velocity_gain, "0..=1")?;
         check(unit(self.deformation_velocity_gain), "deformation_velocity_gain", self.deformation_velocity_gain, "0..=1")?;
         check(self.max_predicted_step_px >= 0.0, "max_predicted_step_px", self.max_predicted_step_px, ">= 0 px")?;

@@ -239,7 +239,7 @@ pub(crate) fn validate_polygon(corners: &[[f64; 2]]) -> Result<(), TemplateError
     let perimeter: f64 = (0..n).map(|j| (v(j + 1) - v(j)).norm()).sum();
     let area = 0.5 * (0..n).map(|j| v(j).x * v(j + 1).y - v(j).y * v(j + 1).x).sum::<f64>();
     // Area relative to a square of the same perimeter: a sliver is no surface to track.
-    if !(perimeter > 1e-9) || area.abs() < 1e-3 * (perimeter / 4.0).powi(2) {
+    if perimeter.is_nan() || perimeter <= 1e-9 || area.abs() < 1e-3 * (perimeter / 4.0).powi(2) {
         return Err(TemplateError::Degenerate("zero area or collinear corners"));
     }
     if (0..n).any(|j| (v(j + 1) - v(j)).norm() < 1e-9) {

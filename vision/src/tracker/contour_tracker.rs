@@ -66,6 +66,8 @@ pub struct ContourTracker {
     filter: PredictiveFilter,
     state: TrackState,
     confidence: Confidence,
+    /// Running average of the inlier share over recent good updates.
+    recent_inliers: f64,
     updates: u64,
     // Per-side search geometry of the current pass, and the same sides for the fit.
     sides: Vec<SideGeometry>,
@@ -122,6 +124,7 @@ impl ContourTracker {
             initial_det: 1.0,
             state: TrackState::Tracking,
             confidence: Confidence::default(),
+            recent_inliers: 0.0,
             updates: 0,
             sides: Vec::with_capacity(sides.max(8)),
             fit_sides: Vec::with_capacity(sides.max(8)),
@@ -149,6 +152,7 @@ impl ContourTracker {
         self.filter.reset();
         self.state = TrackState::Tracking;
         self.confidence = Confidence::default();
+        self.recent_inliers = 0.0;
         self.updates = 0;
         for v in [&mut self.pos_x, &mut self.pos_y, &mut self.rel_x, &mut self.rel_y, &mut self.nrm_x, &mut self.nrm_y] {
             v.clear();
@@ -201,17 +205,25 @@ impl ContourTracker {
                 sigma_max_px: self.config.sigma_max_px.min(search_px),
                 deformation_ridge: self.config.deformation_ridge,
                 perspective_ridge: self.config.perspective_ridge,
-
             };
             let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides, edges: &self.edges };
             let fit = fit_motion(&points, &settings, &mut self.fit);
-            match current.moved(fit.t, fit.a, fit.g, current.frame.origin) {
-                Some(moved) => current = moved,
-                None => {
-                    self.state = TrackState::Lost(LostReason::NotFinite);
-                    self.updates += 1;
-                    return self.state;
-                }
+            let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
+                self.state = TrackState::Lost(LostReason::NotFinite);
+                self.updates += 1;
+                return self.state;
+            };
+            // A pass that barely moved any corner would be searched again at the same places:
+            // skip the remaining passes.
+            let moved_px = self
+                .template
+                .corners()
+                .iter()
+                .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
+                .fold(0.0, f64::max);
+            current = moved;
+            if moved_px < self.config.refine_skip_px {
+                break;
             }
         }
         let verdict = self.judge(&current);
@@ -223,6 +235,8 @@ impl ContourTracker {
                 }
                 self.placement = current;
                 self.learn();
+                let f = self.confidence.inlier_fraction;
+                self.recent_inliers = if self.updates == 0 { f } else { self.recent_inliers + 0.2 * (f - self.recent_inliers) };
                 TrackState::Tracking
             }
         };
@@ -304,7 +318,13 @@ impl ContourTracker {
         let frame = &placement.frame;
         let n = self.template.points().len();
         let (mut outside, mut with_edge, mut inliers, mut sq) = (0usize, 0usize, 0usize, 0.0);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        let (mut axx, mut axy, mut ayy) = (0.0, 0.0, 0.0);
         for i in 0..n {
+            let (nx, ny) = (self.nrm_x[i], self.nrm_y[i]);
+            axx += nx * nx;
+            axy += nx * ny;
+            ayy += ny * ny;
             if self.edges[i].outside {
                 outside += 1;
             }
@@ -314,17 +334,28 @@ impl ContourTracker {
                 if r.abs() <= self.config.inlier_px {
                     inliers += 1;
                     sq += r * r;
+                    sxx += nx * nx;
+                    sxy += nx * ny;
+                    syy += ny * ny;
                 }
             }
         }
         let nf = n as f64;
         let residual_px = if inliers > 0 { (sq / inliers as f64).sqrt() } else { 0.0 };
         let inlier_fraction = inliers as f64 / nf;
+        // How well the inliers pin the contour down in its worst direction, relative to what
+        // all its points would: the smallest eigenvalue of Σ n nᵀ over the inliers over that
+        // of all points. A contour whose left and right sides found nothing cannot tell where
+        // it is along x, however many inliers remain on the others.
+        let lambda_min = |xx: f64, xy: f64, yy: f64| 0.5 * (xx + yy - ((xx - yy).powi(2) + 4.0 * xy * xy).sqrt());
+        let full = lambda_min(axx, axy, ayy);
+        let direction_support = if full > 0.0 { lambda_min(sxx, sxy, syy) / full } else { 0.0 };
         self.confidence = Confidence {
             edge_fraction: with_edge as f64 / nf,
             inlier_fraction,
             residual_px,
             outside_fraction: outside as f64 / nf,
+            direction_support,
             score: inlier_fraction * (-(residual_px / self.config.inlier_px).powi(2)).exp(),
         };
         let c = &self.confidence;
@@ -339,6 +370,12 @@ impl ContourTracker {
         }
         if c.inlier_fraction < self.config.min_inlier_fraction {
             return Some(LostReason::TooFewInliers { inlier_fraction: c.inlier_fraction });
+        }
+        if c.direction_support < self.config.min_direction_support {
+            return Some(LostReason::Unconstrained { direction_support: c.direction_support });
+        }
+        if self.updates >= 3 && c.inlier_fraction < self.config.min_inlier_ratio_to_recent * self.recent_inliers {
+            return Some(LostReason::SuddenDrop { inlier_fraction: c.inlier_fraction, recent: self.recent_inliers });
         }
         if c.residual_px > self.config.max_residual_px {
             return Some(LostReason::ResidualTooLarge { rms_px: c.residual_px });

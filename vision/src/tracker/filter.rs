@@ -45,7 +45,7 @@ impl PredictiveFilter {
 
     /// Updates the velocity from how far the measurement landed from the prediction.
     pub fn correct(&mut self, predicted: &Placement, measured: &Placement, dt_s: f64) {
-        if !(dt_s > 0.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let (p, m) = (predicted.to_params(), measured.to_params());

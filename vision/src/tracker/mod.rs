@@ -2,28 +2,40 @@
 //! robust and fast.
 //!
 //! A polygon (a facet outline, the gripper's tracked face) is held as ~100 sampling points in
-//! affine coordinates `(s, t)` of a frame `o, e1, e2` ([`AffineFrame`]). Each update:
-//! 1. **Predict** the frame with a first-order filter scaled by the real time between frames.
+//! template coordinates `(s, t)` of a frame `o, e1, e2` ([`AffineFrame`]), optionally with a
+//! perspective term ([`Placement`]). Each update:
+//! 1. **Predict** the placement with a first-order filter scaled by the real time between
+//!    frames.
 //! 2. **Search** each point's normal, `±search_px`, for gradient maxima ([`search`]): on the
-//!    pixel grid along the row or column nearest the normal (no interpolation), two-sided
-//!    or one-sided ([`EdgeSign`]), with sub-pixel peaks, keeping up to four candidates.
-//! 3. **Fit** translation (A.1) then deformation (A.2 by default, A.3 as an option) by
-//!    iteratively reweighted least squares (Tukey or Huber), re-choosing each point's
-//!    candidate by the current fit so that nearby texture edges lose to the consistent ones.
+//!    pixel grid along the row or column nearest the normal (no interpolation), two-sided or
+//!    one-sided ([`EdgeSign`]), with sub-pixel peaks, keeping up to four candidates and the
+//!    grey level just inside each.
+//! 3. **Fit** translation (A.1) then shape (A.2, optionally with perspective; A.3 as an
+//!    option) by iteratively reweighted least squares (Tukey or Huber). Each iteration every
+//!    point re-chooses the candidate the current fit explains best, with a penalty when the
+//!    grey level inside it differs from what the point has learnt. The normal equations come
+//!    from nine moments per polygon side, not an outer product per point.
 //! 4. **Refine**: search again with a short range around the fitted contour and refit.
-//! 5. **Judge**: share of points with an edge, share of inliers, inlier residual, frame
-//!    degeneracy, leaving the image. Failing any is the *lost* state with its [`LostReason`];
-//!    the servo must stop on it. Otherwise the per-point polarity and contrast are learnt.
+//! 5. **Judge**: share of points with an edge, share of inliers and whether they pin the
+//!    contour down in every direction, a sudden collapse of that share, the inlier residual,
+//!    frame degeneracy, leaving the image. Failing any is the *lost* state with its
+//!    [`LostReason`]; the servo must stop on it. Otherwise the points' polarity, contrast and
+//!    inside grey level are learnt.
 //!
-//! Choices the thesis leaves open, and why:
-//! - A.2 (normal-only) by default: A.3 ignores the aperture problem and so recovers only part
-//!   of a rotation or shear per step; with a refinement pass and a robust fit the instability
-//!   the thesis saw in A.2 (contours squashed by an occluder) is handled by the outlier
-//!   weights and a small ridge on the deformation.
-//! - Per-point learnt polarity: the face boundaries of real objects change sign along their
-//!   length; one polarity per contour rejects half of a textured face's boundary.
+//! Choices the thesis leaves open, and why (all measured on the real `visp-cube` sequence and
+//! the synthetic tests in `vision/tests/`):
+//! - **Projective by default** (A.2 plus a ridge-damped perspective term): the cube's faces
+//!   are up to 10° off a parallelogram, and an affine fit then sacrifices one side; the
+//!   affine frame `o, e1, e2` stays the contour's local affine frame at its origin.
+//! - **Staged solve** as in the thesis (translation, then shape given it), jumping to the joint
+//!   solution only in the last iteration: solving jointly throughout let a side swing onto a
+//!   neighbouring face's silhouette.
+//! - **Two-sided search plus a learnt inside grey level**, not one-sided: where a neighbouring
+//!   face comes into view beside a side, that side's true polarity flips and a one-sided point
+//!   follows the silhouette instead; the grey level inside the edge (the tracked surface)
+//!   does not change, provided it is learnt slowly and only from edges that already match.
 //!
-//! Zero heap allocations per update after construction (tested in `vision/tests/no_alloc.rs`).
+//! Zero heap allocations per update after construction (`vision/tests/no_alloc.rs`).
 
 mod config;
 mod contour;

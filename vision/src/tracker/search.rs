@@ -125,6 +125,8 @@ fn ceil_to_isize(x: f64) -> isize {
 /// Searches one point's normal for up to [`MAX_CANDIDATES`] gradient maxima of at least
 /// `min_contrast` with the wanted outward sign (`0` = either), keeping the strongest, and
 /// writes them into `out`. `(x, y)` is the predicted point in pixels.
+// The hot path takes plain scalars rather than a parameter struct built per point.
+#[allow(clippy::too_many_arguments)]
 #[inline]
 pub(crate) fn search_point(
     image: &ImageView<'_>,
@@ -251,8 +253,8 @@ pub(crate) fn search_point(
         let outward_derivative = axis_sign * (samples[k + 1] as i16 - samples[k - 1] as i16);
         let sign = if outward_derivative >= 0 { 1.0 } else { -1.0 };
         let at = |offset: isize| samples[(k as isize + offset) as usize] as u32;
-        let inside = ((at(2 * inward) + at(3 * inward) + 1) / 2) as u8;
-        let outside = ((at(-2 * inward) + at(-3 * inward) + 1) / 2) as u8;
+        let inside = (at(2 * inward) + at(3 * inward)).div_ceil(2) as u8;
+        let outside = (at(-2 * inward) + at(-3 * inward)).div_ceil(2) as u8;
         out.candidates[kept] = Candidate { h_px, contrast: sign * peak, inside, outside, penalty_px: 0.0 };
         kept += 1;
     }

@@ -12,6 +12,12 @@ pub enum LostReason {
     TooFewEdges { edge_fraction: f64 },
     /// Too few points agree with the fitted motion.
     TooFewInliers { inlier_fraction: f64 },
+    /// The agreeing points do not pin the contour down in every direction (e.g. only the
+    /// top and bottom sides found their edges: it could be anywhere along them).
+    Unconstrained { direction_support: f64 },
+    /// The share of agreeing points fell abruptly below its recent level (`recent`): the
+    /// contour jumped off its object, or something covered much of it at once.
+    SuddenDrop { inlier_fraction: f64, recent: f64 },
     /// The agreeing points scatter too much about the fit.
     ResidualTooLarge { rms_px: f64 },
     /// The frame is collapsing: squashed (`squash` = singular value ratio of the deformation
@@ -30,6 +36,8 @@ impl LostReason {
             LostReason::LeftImage { .. } => "left_image",
             LostReason::TooFewEdges { .. } => "too_few_edges",
             LostReason::TooFewInliers { .. } => "too_few_inliers",
+            LostReason::Unconstrained { .. } => "unconstrained",
+            LostReason::SuddenDrop { .. } => "sudden_drop",
             LostReason::ResidualTooLarge { .. } => "residual_too_large",
             LostReason::DegenerateBasis { .. } => "degenerate_basis",
             LostReason::FlippedBasis => "flipped_basis",
@@ -50,6 +58,17 @@ impl fmt::Display for LostReason {
             LostReason::TooFewInliers { inlier_fraction } => {
                 write!(f, "too few inliers ({:.0} % of points agree with the fit)", inlier_fraction * 100.0)
             }
+            LostReason::Unconstrained { direction_support } => write!(
+                f,
+                "position unconstrained in one direction ({:.0} % of the full contour's support)",
+                direction_support * 100.0
+            ),
+            LostReason::SuddenDrop { inlier_fraction, recent } => write!(
+                f,
+                "support dropped abruptly ({:.0} % of points agree, recently {:.0} %)",
+                inlier_fraction * 100.0,
+                recent * 100.0
+            ),
             LostReason::ResidualTooLarge { rms_px } => write!(f, "residual too large ({rms_px:.2} px RMS)"),
             LostReason::DegenerateBasis { squash, area_ratio } => {
                 write!(f, "degenerate frame (squash {squash:.1}, area x{area_ratio:.2})")
@@ -99,6 +118,10 @@ pub struct Confidence {
     pub residual_px: f64,
     /// Share of search lines that left the image.
     pub outside_fraction: f64,
+    /// How well the inliers pin the contour down in its worst direction, relative to all its
+    /// points: the smallest eigenvalue of `Σ n nᵀ` over the inliers over that over all points
+    /// (1 when every point agrees, 0 when no inlier constrains some direction).
+    pub direction_support: f64,
     /// One number in 0..1: `inlier_fraction · exp(−(residual_px / inlier_px)²)`.
     pub score: f64,
 }

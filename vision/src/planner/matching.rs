@@ -1,0 +1,378 @@
+//! Candidate stereo matches under the weak linear epipolar constraint, and their mutual
+//! support ("FRIENDS").
+//!
+//! With a linear epipolar constraint `n·(u, v, u', v') + n0 = 0` all epipolar lines in a view
+//! are parallel, so each view has one *epipolar coordinate* across them: for a right point
+//! `x'`, `η(x') = n_r·x' / |n_r|` (right pixels); for a left point `x`, the value its match
+//! must have, `η̂(x) = −(n_l·x + n0) / |n_r|`. A left segment covers an interval of `η̂`, a
+//! right segment an interval of `η`; a candidate match needs the two intervals to overlap
+//! (each widened by the tolerance `epipolar_tol_px` of the weak calibration), the implied
+//! horizontal disparities `u' − u` to fall within the workspace limits, the same contrast
+//! polarity and similar contrast, and a bounded change of orientation. Right segments are
+//! sorted by interval start, so each left segment scans only those that can overlap.
+//!
+//! Two candidates are *friends* when their left segments form a junction and their right
+//! segments form the corresponding junction (same ends), with the two junction points
+//! themselves obeying the epipolar constraint: the figural continuity that seeds coplanarity
+//! grouping.
+
+use super::geom::{self, P2};
+use super::relations::{End, Relations};
+use super::segments::Segment;
+use crate::affine::{AffineStereo, EpipolarConstraint, FitError};
+
+/// The stereo geometry the matcher works with: the epipolar constraint (known up to a small
+/// error) and the workspace's disparity limits; the full affine model when calibrated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoGeometry {
+    pub epipolar: EpipolarConstraint,
+    /// Allowed horizontal disparity `u' − u`, pixels (margins included).
+    pub disparity_px: [f64; 2],
+    /// The affine stereo model, when the robot coordinates of the calibration are known.
+    pub model: Option<AffineStereo>,
+}
+
+impl StereoGeometry {
+    /// From a calibrated model: its epipolar constraint, and its calibration disparity range
+    /// widened by `margin_frac` of the range plus `margin_px` on each side (objects on the
+    /// table lie a little outside a cage held above it).
+    pub fn from_model(model: AffineStereo, margin_frac: f64, margin_px: f64) -> Self {
+        let [lo, hi] = model.disparity_range_px;
+        let m = margin_frac * (hi - lo) + margin_px;
+        Self { epipolar: model.epipolar(), disparity_px: [lo - m, hi + m], model: Some(model) }
+    }
+
+    /// From `>= 4` correspondences `(u, v, u', v')` without robot coordinates: the epipolar
+    /// constraint by orthogonal regression, disparity limits from their range plus margins.
+    pub fn from_correspondences(points: &[[f64; 4]], margin_frac: f64, margin_px: f64) -> Result<Self, FitError> {
+        let epipolar = EpipolarConstraint::fit(points)?;
+        let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| (lo.min(w[2] - w[0]), hi.max(w[2] - w[0])));
+        let m = margin_frac * (hi - lo) + margin_px;
+        Ok(Self { epipolar, disparity_px: [lo - m, hi + m], model: None })
+    }
+}
+
+/// Epipolar coordinates of both views (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct EpipolarFrame {
+    nl: P2,
+    nr: P2,
+    n0: f64,
+    inv_nr: f64,
+}
+
+impl EpipolarFrame {
+    pub fn new(e: &EpipolarConstraint) -> Self {
+        let nl = [e.n[0], e.n[1]];
+        let nr = [e.n[2], e.n[3]];
+        let len = geom::norm(nr).max(1e-9);
+        Self { nl, nr, n0: e.n0, inv_nr: 1.0 / len }
+    }
+
+    /// `(n_l, n_r, n0, 1/|n_r|)`.
+    pub fn raw(&self) -> (P2, P2, f64, f64) {
+        (self.nl, self.nr, self.n0, self.inv_nr)
+    }
+
+    /// `η` of a right point, right pixels across the epipolar lines.
+    #[inline]
+    pub fn eta_right(&self, x: P2) -> f64 {
+        geom::dot(self.nr, x) * self.inv_nr
+    }
+
+    /// The `η` a left point's match must have.
+    #[inline]
+    pub fn eta_left(&self, x: P2) -> f64 {
+        -(geom::dot(self.nl, x) + self.n0) * self.inv_nr
+    }
+
+    /// Signed distance of right point `xr` from the epipolar line of left point `xl`, right
+    /// pixels.
+    #[inline]
+    pub fn residual(&self, xl: P2, xr: P2) -> f64 {
+        self.eta_right(xr) - self.eta_left(xl)
+    }
+
+    /// Unit direction of the epipolar lines in the right view.
+    pub fn right_dir(&self) -> P2 {
+        [-self.nr[1] * self.inv_nr, self.nr[0] * self.inv_nr]
+    }
+
+    /// Unit direction of the epipolar lines in the left view.
+    pub fn left_dir(&self) -> P2 {
+        let l = geom::norm(self.nl).max(1e-12);
+        [-self.nl[1] / l, self.nl[0] / l]
+    }
+
+    /// The point on the line `p + t·d` (right view) whose `η` is `eta`; `None` when the line
+    /// runs along the epipolar lines.
+    pub fn right_point_at(&self, p: P2, d: P2, eta: f64) -> Option<P2> {
+        let rate = geom::dot(self.nr, d) * self.inv_nr;
+        (rate.abs() > 1e-9).then(|| geom::add(p, geom::scale(d, (eta - self.eta_right(p)) / rate)))
+    }
+
+    /// The point on the line `p + t·d` (left view) whose `η̂` is `eta`.
+    pub fn left_point_at(&self, p: P2, d: P2, eta: f64) -> Option<P2> {
+        let rate = -geom::dot(self.nl, d) * self.inv_nr;
+        (rate.abs() > 1e-9).then(|| geom::add(p, geom::scale(d, (eta - self.eta_left(p)) / rate)))
+    }
+}
+
+/// Tolerances of candidate matching.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MatchConfig {
+    /// How far a match may sit off its epipolar line (weak calibration), right pixels.
+    pub epipolar_tol_px: f64,
+    /// Smallest overlap of the epipolar intervals, as a fraction of the shorter one.
+    pub min_overlap: f64,
+    /// Largest change of a segment's orientation between views, degrees.
+    pub max_turn_deg: f64,
+    /// Largest ratio of the two segments' contrasts. Kept loose: an occluding edge's contrast
+    /// changes between views when the surface behind it differs (a side face seen in one view
+    /// only).
+    pub max_contrast_ratio: f64,
+    /// Segments within this angle of the epipolar lines are matched by band only, degrees.
+    pub epipolar_parallel_deg: f64,
+}
+
+impl Default for MatchConfig {
+    fn default() -> Self {
+        Self { epipolar_tol_px: 3.0, min_overlap: 0.3, max_turn_deg: 45.0, max_contrast_ratio: 8.0, epipolar_parallel_deg: 10.0 }
+    }
+}
+
+/// A candidate match between left segment `left` and right segment `right`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    pub left: u32,
+    pub right: u32,
+    /// Overlap of the epipolar intervals, right pixels (for segments along the epipolar
+    /// lines: of their extents along them).
+    pub overlap_px: f64,
+    /// Whether either segment runs within `epipolar_parallel_deg` of the epipolar lines, so
+    /// that the epipolar constraint does not fix its correspondence along its length.
+    pub along_epipolar: bool,
+}
+
+/// All candidates, grouped by left segment (sorted by `(left, right)`).
+#[derive(Debug, Clone, Default)]
+pub struct Candidates {
+    pub list: Vec<Candidate>,
+    offsets: Vec<u32>,
+}
+
+impl Candidates {
+    /// Indices into `list` of the candidates of left segment `l`.
+    pub fn of_left(&self, l: u32) -> std::ops::Range<usize> {
+        let l = l as usize;
+        if l + 1 >= self.offsets.len() {
+            return 0..0;
+        }
+        self.offsets[l] as usize..self.offsets[l + 1] as usize
+    }
+
+    /// Index of the candidate `(l, r)`, if there is one.
+    pub fn find(&self, l: u32, r: u32) -> Option<usize> {
+        let range = self.of_left(l);
+        let start = range.start;
+        self.list[range].binary_search_by_key(&r, |c| c.right).ok().map(|i| start + i)
+    }
+}
+
+/// Whether a segment runs within `deg` of the epipolar direction `e`.
+fn along(s: &Segment, e: P2, deg: f64) -> bool {
+    geom::cross(s.dir(), e).abs() < deg.to_radians().sin()
+}
+
+/// Enumerates candidate matches (see the module docs).
+pub fn candidates(left: &[Segment], right: &[Segment], geo: &StereoGeometry, cfg: &MatchConfig) -> Candidates {
+    let ef = EpipolarFrame::new(&geo.epipolar);
+    let tol = cfg.epipolar_tol_px;
+    let (el, er) = (ef.left_dir(), ef.right_dir());
+    // Right intervals, sorted by start.
+    let mut rint: Vec<(f64, f64, u32)> = right
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let (a, b) = (ef.eta_right(s.p0), ef.eta_right(s.p1));
+            (a.min(b), a.max(b), i as u32)
+        })
+        .collect();
+    rint.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let max_ext = rint.iter().map(|r| r.1 - r.0).fold(0.0, f64::max);
+    let starts: Vec<f64> = rint.iter().map(|r| r.0).collect();
+    let cos_turn = cfg.max_turn_deg.to_radians().cos();
+    let [dmin, dmax] = geo.disparity_px;
+
+    let mut out = Candidates { list: Vec::new(), offsets: Vec::with_capacity(left.len() + 1) };
+    out.offsets.push(0);
+    for (il, l) in left.iter().enumerate() {
+        let (a, b) = (ef.eta_left(l.p0), ef.eta_left(l.p1));
+        let (lo_l, hi_l) = (a.min(b), a.max(b));
+        let l_along = along(l, el, cfg.epipolar_parallel_deg);
+        let from = starts.partition_point(|&s| s < lo_l - tol - max_ext);
+        let to = starts.partition_point(|&s| s <= hi_l + tol);
+        let first = out.list.len();
+        for &(lo_r, hi_r, ir) in &rint[from..to] {
+            if hi_r < lo_l - tol {
+                continue;
+            }
+            let r = &right[ir as usize];
+            // Same polarity and a bounded turn (directions are polarity-oriented).
+            if geom::dot(l.dir(), r.dir()) < cos_turn {
+                continue;
+            }
+            let ratio = l.contrast.max(r.contrast) / l.contrast.min(r.contrast).max(1e-9);
+            if ratio > cfg.max_contrast_ratio {
+                continue;
+            }
+            let r_along = along(r, er, cfg.epipolar_parallel_deg);
+            let is_along = l_along || r_along;
+            let overlap = (hi_l.min(hi_r) - lo_l.max(lo_r)).max(0.0);
+            let disp = if is_along {
+                // Correspondence along the segment is not fixed: any pairing may hold.
+                let ul = (l.p0[0].min(l.p1[0]), l.p0[0].max(l.p1[0]));
+                let ur = (r.p0[0].min(r.p1[0]), r.p0[0].max(r.p1[0]));
+                (ur.0 - ul.1, ur.1 - ul.0)
+            } else {
+                let ext = (hi_l - lo_l).min(hi_r - lo_r);
+                if overlap + 2.0 * tol < cfg.min_overlap * ext || overlap + 2.0 * tol <= 0.0 {
+                    continue;
+                }
+                // Disparity at both ends of the overlap (linear in between).
+                let (e0, e1) = (lo_l.max(lo_r) - tol, hi_l.min(hi_r) + tol);
+                let mut dl = (f64::INFINITY, f64::NEG_INFINITY);
+                for e in [e0.max(lo_l.min(lo_r)), e1.min(hi_l.max(hi_r))] {
+                    let (Some(xl), Some(xr)) = (ef.left_point_at(l.p0, l.dir(), e), ef.right_point_at(r.p0, r.dir(), e)) else { continue };
+                    let d = xr[0] - xl[0];
+                    dl = (dl.0.min(d), dl.1.max(d));
+                }
+                dl
+            };
+            if disp.1 < dmin || disp.0 > dmax {
+                continue;
+            }
+            out.list.push(Candidate { left: il as u32, right: ir, overlap_px: overlap, along_epipolar: is_along });
+        }
+        out.list[first..].sort_by_key(|c| c.right);
+        out.offsets.push(out.list.len() as u32);
+    }
+    out
+}
+
+/// A pair of friendly candidates with the corresponding junction points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Friendship {
+    /// Candidate indices, `a < b`.
+    pub a: u32,
+    pub b: u32,
+    /// Junction point in the left and in the right view.
+    pub left_point: P2,
+    pub right_point: P2,
+}
+
+/// Finds the friends among `cands` (see the module docs).
+pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &StereoGeometry, cfg: &MatchConfig) -> Vec<Friendship> {
+    let ef = EpipolarFrame::new(&geo.epipolar);
+    let mut out = Vec::new();
+    for jl in &rel_l.junctions {
+        for ca in cands.of_left(jl.a) {
+            let ra = cands.list[ca].right;
+            for &jri in rel_r.junctions_of(ra) {
+                let jr = &rel_r.junctions[jri as usize];
+                let (rb, end_rb) = jr.other(ra);
+                if jr.end_of(ra) != jl.end_a || end_rb != jl.end_b {
+                    continue;
+                }
+                let Some(cb) = cands.find(jl.b, rb) else { continue };
+                if ef.residual(jl.point, jr.point).abs() > cfg.epipolar_tol_px {
+                    continue;
+                }
+                let d = jr.point[0] - jl.point[0];
+                if d < geo.disparity_px[0] || d > geo.disparity_px[1] {
+                    continue;
+                }
+                let (a, b) = if ca < cb { (ca as u32, cb as u32) } else { (cb as u32, ca as u32) };
+                out.push(Friendship { a, b, left_point: jl.point, right_point: jr.point });
+            }
+        }
+    }
+    out.sort_by_key(|f| (f.a, f.b));
+    out.dedup_by_key(|f| (f.a, f.b));
+    out
+}
+
+/// Whether a junction end is a true end (L/Y) rather than the interior of a T.
+pub fn is_end(e: End) -> bool {
+    e != End::Interior
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planner::relations::{find_relations, RelationConfig};
+    use nalgebra::Vector4;
+
+    fn seg(p0: P2, p1: P2) -> Segment {
+        Segment { p0, p1, contrast: 10.0, rms_px: 0.1, n_points: 20 }
+    }
+
+    /// Horizontal epipolar lines: v' = v (n = (0, −1, 0, 1)/√2), disparity in [−40, 0].
+    fn rectified() -> StereoGeometry {
+        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), disparity_px: [-40.0, 0.0], model: None }
+    }
+
+    #[test]
+    fn candidates_respect_band_disparity_and_polarity() {
+        let left = vec![seg([100.0, 50.0], [100.0, 100.0])];
+        let right = vec![
+            seg([80.0, 52.0], [80.0, 103.0]),   // good: disparity −20, overlapping band
+            seg([30.0, 50.0], [30.0, 100.0]),   // disparity −70: outside the limits
+            seg([90.0, 100.0], [90.0, 50.0]),   // opposite polarity
+            seg([85.0, 140.0], [85.0, 190.0]),  // another band
+            seg([95.0, 40.0], [96.0, 60.0]),    // overlaps 10 of 20 px: enough
+        ];
+        let c = candidates(&left, &right, &rectified(), &MatchConfig::default());
+        let rs: Vec<u32> = c.list.iter().map(|c| c.right).collect();
+        assert_eq!(rs, vec![0, 4]);
+        assert!(c.find(0, 0).is_some() && c.find(0, 1).is_none());
+    }
+
+    #[test]
+    fn epipolar_frame_residual_matches_the_constraint() {
+        let e = EpipolarConstraint::from_normal(Vector4::new(0.1, -0.9, 0.05, 0.95), 3.0);
+        let f = EpipolarFrame::new(&e);
+        let (xl, xr) = ([120.0, 80.0], [100.0, 90.0]);
+        let w = [xl[0], xl[1], xr[0], xr[1]];
+        let nr = (e.n[2] * e.n[2] + e.n[3] * e.n[3]).sqrt();
+        assert!((f.residual(xl, xr) - e.residual_px(&w) / nr).abs() < 1e-12);
+        // Moving along the right epipolar direction keeps the residual.
+        let moved = geom::add(xr, geom::scale(f.right_dir(), 7.0));
+        assert!((f.residual(xl, moved) - f.residual(xl, xr)).abs() < 1e-12);
+        // right_point_at lands on the requested η.
+        let p = f.right_point_at([0.0, 0.0], [0.6, 0.8], 42.0).unwrap();
+        assert!((f.eta_right(p) - 42.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn friends_need_corresponding_junctions_on_the_epipolar_line() {
+        // An L corner in both views, shifted by −20 px; plus a decoy L in the right view at
+        // the wrong height for the second segment.
+        let left = vec![seg([100.0, 50.0], [160.0, 50.0]), seg([100.0, 110.0], [100.0, 50.0])];
+        let right = vec![seg([80.0, 50.0], [140.0, 50.0]), seg([80.0, 110.0], [80.0, 50.0])];
+        let geo = rectified();
+        let cfg = MatchConfig::default();
+        let c = candidates(&left, &right, &geo, &cfg);
+        let rl = find_relations(&left, 320, 240, &RelationConfig::default());
+        let rr = find_relations(&right, 320, 240, &RelationConfig::default());
+        let f = friends(&c, &rl, &rr, &geo, &cfg);
+        assert_eq!(f.len(), 1, "{f:?}");
+        assert_eq!((c.list[f[0].a as usize].left, c.list[f[0].b as usize].left), (0, 1));
+        assert!(geom::dist(f[0].right_point, [80.0, 50.0]) < 1e-9);
+        // Break the right corner's epipolar consistency (move it 10 px down): no friends.
+        let right2 = vec![seg([80.0, 60.0], [140.0, 60.0]), seg([80.0, 120.0], [80.0, 60.0])];
+        let c2 = candidates(&left, &right2, &geo, &cfg);
+        let rr2 = find_relations(&right2, 320, 240, &RelationConfig::default());
+        assert!(friends(&c2, &rl, &rr2, &geo, &cfg).is_empty());
+    }
+}
