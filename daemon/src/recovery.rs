@@ -136,3 +136,93 @@ impl Recovery {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::tracker::TrackerConfig;
+
+    /// A bright plate in a dark border (the gripper) and a grey square (the target), shifted
+    /// by `(dx, dy)`.
+    fn scene(dx: i64, dy: i64) -> ImageBuf {
+        let mut img = ImageBuf::filled(400, 300, 90);
+        let mut rect = |x0: i64, y0: i64, x1: i64, y1: i64, v: u8| {
+            for y in (y0 + dy).max(0)..(y1 + dy).min(300) {
+                for x in (x0 + dx).max(0)..(x1 + dx).min(400) {
+                    img.set(x as usize, y as usize, v);
+                }
+            }
+        };
+        rect(150, 60, 210, 120, 10);
+        rect(158, 68, 202, 112, 220);
+        rect(160, 190, 200, 230, 170);
+        img
+    }
+
+    fn trackers(img: &ImageBuf) -> StereoTrackerSet {
+        let plate = [[157.5, 67.5], [201.5, 67.5], [201.5, 111.5], [157.5, 111.5]];
+        let target = [[159.5, 189.5], [199.5, 189.5], [199.5, 229.5], [159.5, 229.5]];
+        let mut set = StereoTrackerSet::new();
+        for v in View::ALL {
+            set.insert(Role::Gripper, v, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
+            set.insert(Role::Target, v, ContourTracker::new(TrackerConfig::default(), &target).unwrap());
+        }
+        for _ in 0..3 {
+            let s = set.update(&img.view(), &img.view(), 0.03);
+            assert!(s.all_active_tracking());
+        }
+        set
+    }
+
+    #[test]
+    fn a_knocked_view_is_found_again_at_its_shift() {
+        let still = scene(0, 0);
+        let mut set = trackers(&still);
+        // The left camera is knocked: its whole image moves 63 px left and 7 px down.
+        let knocked = scene(-63, 7);
+        let states = set.update(&knocked.view(), &still.view(), 0.03);
+        assert!(!states.get(Role::Gripper, View::Left).unwrap().is_tracking(), "a 63 px jump loses the tracker");
+        let mut rec = Recovery::start(&set, View::Left, 10).unwrap();
+        let mut shift = None;
+        for _ in 0..40 {
+            set.update(&knocked.view(), &still.view(), 0.03);
+            match rec.step(&mut set, &knocked.view(), true) {
+                RecoveryStep::Searching => {}
+                RecoveryStep::Recovered { shift_px } => {
+                    shift = Some(shift_px);
+                    break;
+                }
+                RecoveryStep::Failed(why) => panic!("{why}"),
+            }
+        }
+        let shift = shift.expect("recovered");
+        assert!((shift[0] + 63.0).abs() < 1.0 && (shift[1] - 7.0).abs() < 1.0, "{shift:?}");
+        // Both trackers of the view sit on their shapes again.
+        let g = set.get(Role::Gripper, View::Left).unwrap();
+        assert!(g.state().is_tracking());
+        let c = g.corners().next().unwrap();
+        assert!((c.x - (157.5 - 63.0)).abs() < 1.0 && (c.y - (67.5 + 7.0)).abs() < 1.0, "{c:?}");
+        assert!(set.get(Role::Target, View::Left).unwrap().state().is_tracking());
+    }
+
+    #[test]
+    fn nothing_to_find_fails_with_a_reason() {
+        let still = scene(0, 0);
+        let mut set = trackers(&still);
+        let blank = ImageBuf::filled(400, 300, 90);
+        set.update(&blank.view(), &still.view(), 0.03);
+        let mut rec = Recovery::start(&set, View::Left, 0).unwrap();
+        let mut outcome = RecoveryStep::Searching;
+        for _ in 0..20 {
+            outcome = rec.step(&mut set, &blank.view(), true);
+            if outcome != RecoveryStep::Searching {
+                break;
+            }
+        }
+        assert!(matches!(&outcome, RecoveryStep::Failed(why) if why.contains("not found")), "{outcome:?}");
+        // And it gives up at once when the other view is lost too.
+        let mut rec = Recovery::start(&set, View::Left, 0).unwrap();
+        assert!(matches!(rec.step(&mut set, &blank.view(), false), RecoveryStep::Failed(_)));
+    }
+}
