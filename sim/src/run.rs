@@ -128,7 +128,7 @@ pub struct Runner {
 
 impl Runner {
     pub fn new(sim: Simulator) -> Result<Self, RenderError> {
-        let renderer = Renderer::for_scene(&sim.scene, &sim.events.cameras)?;
+        let renderer = Renderer::for_scene_with(&sim.scene, &sim.events.cameras, sim.scenario.render.antialias)?;
         Ok(Self {
             sim,
             renderer,
