@@ -7,7 +7,7 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_point, Candidate, PointEdges, SideGeometry};
+use super::search::{search_point_with, Candidate, LineScratch, PointEdges, SideGeometry};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -85,6 +85,8 @@ pub struct ContourTracker {
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
     fit: FitBuffers,
+    /// Samples of the search line being worked on.
+    line: LineScratch,
 }
 
 impl ContourTracker {
@@ -138,6 +140,7 @@ impl ContourTracker {
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
+            line: LineScratch::default(),
         };
         tracker.restart(frame);
         tracker
@@ -299,7 +302,17 @@ impl ContourTracker {
                         if r.abs() >= self.config.min_contrast as f32 { r.signum() as i32 } else { 0 }
                     }
                 };
-                search_point(image, &side, p.x, p.y, search_px, sign, self.config.min_contrast, &mut self.edges[i]);
+                search_point_with(
+                    image,
+                    &side,
+                    p.x,
+                    p.y,
+                    search_px,
+                    sign,
+                    self.config.min_contrast,
+                    &mut self.line,
+                    &mut self.edges[i],
+                );
                 let reference = self.ref_inside[i];
                 if self.config.appearance_px_per_grey > 0.0 && reference >= 0.0 {
                     let gain = self.config.appearance_px_per_grey as f32;
