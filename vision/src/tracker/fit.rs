@@ -10,7 +10,8 @@
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
-use super::search::{PointEdges, MAX_CANDIDATES};
+use super::search::{Candidate, PointEdges, MAX_CANDIDATES};
+use super::simd::F32x4;
 
 /// Which least-squares problem estimates the shape change (Appendix A).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -71,84 +72,182 @@ pub(crate) struct FitResult {
 }
 
 /// Per-point data the fit writes, and its working copies; all sized at construction.
+///
+/// The working copies are f32, one array per quantity so the loops run four points at a time
+/// ([`F32x4`]), padded to whole groups of four with points that have no candidate. The
+/// tracker fills them as it searches ([`set_point`](Self::set_point),
+/// [`set_candidates`](Self::set_candidates)); nothing is copied between search and fit.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct FitBuffers {
-    /// Chosen candidate index per point, -1 for none.
+    /// Chosen candidate index per point, -1 for none (after [`finish`](Self::finish)).
     pub chosen: Vec<i8>,
     /// Residual of the chosen candidate after the fit, px (0 for none).
     pub residual: Vec<f64>,
     /// Final robust weight (0 for none).
     pub weight: Vec<f64>,
-    // Working copies in f32, one array per quantity so the loops vectorise: position,
-    // normal and c = n·p of each point's side, the candidates' offsets and penalties
-    // (+∞ for an empty slot), and per iteration the chosen offset, residual and weight.
+    /// Points, and lanes (points rounded up to a multiple of 4).
+    n: usize,
+    lanes: usize,
+    // Position relative to the centre, normal and c = n·p of the point's side.
     x: Vec<f32>,
     y: Vec<f32>,
     nx: Vec<f32>,
     ny: Vec<f32>,
     c: Vec<f32>,
-    /// Slot-major: slot k of point i at `k * n + i`, so four neighbouring points of one slot
-    /// load together.
+    /// Candidates' offsets and penalties, slot-major (slot k of point i at `k * lanes + i`, so
+    /// four neighbouring points of one slot load together); +∞ penalty for an empty slot.
     cand_h: Vec<f32>,
     cand_pen: Vec<f32>,
+    /// Per iteration: the chosen offset, its residual, whether there was one (a lane mask),
+    /// and the robust weight.
     h: Vec<f32>,
     r: Vec<f32>,
+    valid: Vec<f32>,
     w: Vec<f32>,
+    /// The last fit's motion, robust scale and loss, for [`finish`](Self::finish).
+    last: Option<(Vec8, f64, RobustLoss)>,
 }
 
 impl FitBuffers {
     pub fn with_capacity(n: usize) -> Self {
+        let lanes = n.div_ceil(4) * 4;
         Self {
             chosen: Vec::with_capacity(n),
             residual: Vec::with_capacity(n),
             weight: Vec::with_capacity(n),
-            x: Vec::with_capacity(n),
-            y: Vec::with_capacity(n),
-            nx: Vec::with_capacity(n),
-            ny: Vec::with_capacity(n),
-            c: Vec::with_capacity(n),
-            cand_h: Vec::with_capacity(n * MAX_CANDIDATES),
-            cand_pen: Vec::with_capacity(n * MAX_CANDIDATES),
-            h: Vec::with_capacity(n),
-            r: Vec::with_capacity(n),
-            w: Vec::with_capacity(n),
+            n: 0,
+            lanes: 0,
+            x: Vec::with_capacity(lanes),
+            y: Vec::with_capacity(lanes),
+            nx: Vec::with_capacity(lanes),
+            ny: Vec::with_capacity(lanes),
+            c: Vec::with_capacity(lanes),
+            cand_h: Vec::with_capacity(lanes * MAX_CANDIDATES),
+            cand_pen: Vec::with_capacity(lanes * MAX_CANDIDATES),
+            h: Vec::with_capacity(lanes),
+            r: Vec::with_capacity(lanes),
+            valid: Vec::with_capacity(lanes),
+            w: Vec::with_capacity(lanes),
+            last: None,
         }
     }
 
-    /// Sets the length to `n` (no allocation within capacity).
+    /// Sets the number of points to `n` (no allocation within capacity). The padding lanes
+    /// get no candidate; the points' own data is left for the caller to set.
     pub fn resize(&mut self, n: usize) {
+        let lanes = n.div_ceil(4) * 4;
         self.chosen.resize(n, -1);
         self.residual.resize(n, 0.0);
         self.weight.resize(n, 0.0);
-        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.w] {
-            v.resize(n, 0.0);
+        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.valid, &mut self.w] {
+            v.resize(lanes, 0.0);
         }
-        self.cand_h.resize(n * MAX_CANDIDATES, 0.0);
-        self.cand_pen.resize(n * MAX_CANDIDATES, f32::INFINITY);
+        self.cand_h.resize(lanes * MAX_CANDIDATES, 0.0);
+        self.cand_pen.resize(lanes * MAX_CANDIDATES, f32::INFINITY);
+        (self.n, self.lanes) = (n, lanes);
+        for i in n..lanes {
+            self.set_point(i, 0.0, 0.0, 0.0, 0.0, 0.0);
+            self.set_candidates(i, &[]);
+        }
+        self.last = None;
     }
 
-    /// Fills the working copies from the pass's points.
-    fn prepare(&mut self, points: &FitPoints<'_>) {
+    /// Asserts the layout the four-lane loops rely on to read without bounds checks: every
+    /// working array holds `lanes` values (per candidate slot), a multiple of 4.
+    #[inline]
+    fn check_lanes(&self) {
+        let l = self.lanes;
+        assert!(
+            l % 4 == 0
+                && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w]
+                    .iter()
+                    .all(|v| v.len() == l)
+                && self.cand_h.len() == l * MAX_CANDIDATES
+                && self.cand_pen.len() == l * MAX_CANDIDATES,
+            "fit buffers out of shape"
+        );
+    }
+
+    /// Point `i`'s position relative to the fit's centre, its side's normal and `c = n·p`.
+    #[inline]
+    pub fn set_point(&mut self, i: usize, x: f32, y: f32, nx: f32, ny: f32, c: f32) {
+        self.x[i] = x;
+        self.y[i] = y;
+        self.nx[i] = nx;
+        self.ny[i] = ny;
+        self.c[i] = c;
+    }
+
+    /// The points `first..first + x.len()` of one side: positions relative to the fit's
+    /// centre, and the side's normal and `c = n·p` as `(n.x, n.y, c)`.
+    pub fn set_side(&mut self, first: usize, x: &[f64], y: &[f64], (nx, ny, c): (f32, f32, f32)) {
+        let range = first..first + x.len();
+        for (d, s) in self.x[range.clone()].iter_mut().zip(x) {
+            *d = *s as f32;
+        }
+        for (d, s) in self.y[range.clone()].iter_mut().zip(y) {
+            *d = *s as f32;
+        }
+        self.nx[range.clone()].fill(nx);
+        self.ny[range.clone()].fill(ny);
+        self.c[range].fill(c);
+    }
+
+    /// The candidate edges of the points `first..first + edges.len()`.
+    pub fn set_side_candidates(&mut self, first: usize, edges: &[PointEdges]) {
+        let (lanes, end) = (self.lanes, first + edges.len());
+        for k in 0..MAX_CANDIDATES {
+            let slot = k * lanes;
+            let cand_h = &mut self.cand_h[slot + first..slot + end];
+            let cand_pen = &mut self.cand_pen[slot + first..slot + end];
+            for ((h, pen), e) in cand_h.iter_mut().zip(cand_pen.iter_mut()).zip(edges) {
+                let c = &e.candidates[k];
+                (*h, *pen) = if k < e.count as usize { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
+            }
+        }
+    }
+
+    /// Point `i`'s candidate edges (at most [`MAX_CANDIDATES`]): offsets and penalties.
+    #[inline]
+    pub fn set_candidates(&mut self, i: usize, candidates: &[Candidate]) {
+        let lanes = self.lanes;
+        for k in 0..MAX_CANDIDATES {
+            let (h, pen) = match candidates.get(k) {
+                Some(c) => (c.h_px, c.penalty_px),
+                None => (0.0, f32::INFINITY),
+            };
+            self.cand_h[k * lanes + i] = h;
+            self.cand_pen[k * lanes + i] = pen;
+        }
+    }
+
+    /// Fills the working copies from a pass's points (the tracker sets them as it searches
+    /// instead).
+    #[cfg(test)]
+    fn load(&mut self, points: &FitPoints<'_>, edges: &[PointEdges]) {
         self.resize(points.px.len());
         for side in points.sides {
             for i in side.first..side.first + side.count {
-                self.nx[i] = side.normal.x as f32;
-                self.ny[i] = side.normal.y as f32;
-                self.c[i] = side.np as f32;
+                let (nx, ny, c) = (side.normal.x as f32, side.normal.y as f32, side.np as f32);
+                self.set_point(i, points.px[i] as f32, points.py[i] as f32, nx, ny, c);
             }
         }
-        let n = points.px.len();
-        for (i, e) in points.edges.iter().enumerate() {
-            self.x[i] = points.px[i] as f32;
-            self.y[i] = points.py[i] as f32;
-            for k in 0..MAX_CANDIDATES {
-                let (h, pen) = match e.as_slice().get(k) {
-                    Some(cand) => (cand.h_px, cand.penalty_px),
-                    None => (0.0, f32::INFINITY),
-                };
-                self.cand_h[k * n + i] = h;
-                self.cand_pen[k * n + i] = pen;
-            }
+        for (i, e) in edges.iter().enumerate() {
+            self.set_candidates(i, e.as_slice());
+        }
+    }
+
+    /// The per-point results of the last fit: every point's chosen candidate, residual and
+    /// weight against the final motion. Does nothing before a fit or when already done.
+    pub fn finish(&mut self) {
+        let Some((theta, sigma, loss)) = self.last.take() else {
+            return;
+        };
+        associate_scalar(&theta, self);
+        weigh(loss, sigma, self);
+        for i in 0..self.n {
+            self.residual[i] = self.r[i] as f64;
+            self.weight[i] = self.w[i] as f64;
         }
     }
 }
@@ -163,12 +262,12 @@ pub(crate) struct FitSide {
     pub np: f64,
 }
 
-/// Point geometry of one pass: positions relative to the centre, grouped by side.
+/// Point geometry of one pass: positions relative to the centre, grouped by side (the
+/// candidates are in the [`FitBuffers`]).
 pub(crate) struct FitPoints<'a> {
     pub px: &'a [f64],
     pub py: &'a [f64],
     pub sides: &'a [FitSide],
-    pub edges: &'a [PointEdges],
 }
 
 /// Parameters `θ = (t.x, t.y, a11, a12, a21, a22, g.x, g.y)`.
@@ -208,7 +307,8 @@ const HIST_PER_PX: f64 = 16.0;
 /// the median absolute residual and the weights follow.
 pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &mut FitBuffers) -> FitResult {
     let n = points.px.len();
-    buf.prepare(points);
+    debug_assert_eq!(n, buf.n, "the buffers hold this pass's points");
+    buf.last = None;
     let mut theta = Vec8::zeros();
     // Scale of the template for the ridges: mean |p|².
     let mut p2 = 0.0;
@@ -222,9 +322,9 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
     for iter in 0..iterations {
         // 1. Association and residuals under the current motion, with their histogram.
         let mut hist = [0u16; HIST_BINS];
-        let found = associate(&theta, buf, Some(&mut hist));
+        let found = associate(&theta, buf, &mut hist);
         if found == 0 {
-            buf.weight.iter_mut().for_each(|w| *w = 0.0);
+            buf.last = Some((theta, sigma, settings.loss));
             return result(&theta);
         }
         // 2. Robust scale 1.4826·MAD within bounds; the first iteration starts at the top so
@@ -296,83 +396,117 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
             break;
         }
     }
-    // Final association, residuals and weights against the final motion (for confidence).
-    associate(&theta, buf, None);
-    weigh(settings.loss, sigma, buf);
-    for i in 0..n {
-        buf.residual[i] = buf.r[i] as f64;
-        buf.weight[i] = buf.w[i] as f64;
-    }
+    // The final association, residuals and weights (for the confidence) wait for
+    // `FitBuffers::finish`: a pass that is followed by another does not need them.
+    buf.last = Some((theta, sigma, settings.loss));
     result(&theta)
 }
 
 /// Gives every point the candidate closest to the motion's prediction (distance plus the
-/// candidate's penalty) and records its offset, residual and index; counts the points with a
-/// candidate and, if asked, bins their absolute residuals. Branch-free over the candidate
-/// slots, so the loop vectorises.
+/// candidate's penalty; the first of equals) and records its offset, residual and whether it
+/// had one; bins the absolute residuals of those that did and returns their number. Four
+/// points at a time, branch-free over the candidate slots.
 #[inline]
-fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: Option<&mut [u16; HIST_BINS]>) -> usize {
+fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: &mut [u16; HIST_BINS]) -> usize {
+    let th: [F32x4; 8] = std::array::from_fn(|k| F32x4::splat(theta[k] as f32));
+    let lanes = buf.lanes;
+    buf.check_lanes();
+    let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
+    let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
+    let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let inf = F32x4::splat(f32::INFINITY);
+    let scale = F32x4::splat(HIST_PER_PX as f32);
+    let top_bin = F32x4::splat((HIST_BINS - 1) as f32);
+    let mut found = 0usize;
+    for i in (0..lanes).step_by(4) {
+        // SAFETY: i + 4 <= lanes and every array holds `lanes` values per slot (checked
+        // above), so every access below is in bounds.
+        unsafe {
+            let (px, py) = (F32x4::load_ptr(x.add(i)), F32x4::load_ptr(y.add(i)));
+            // n·(t + A p) − c (g·p), in the order of `associate_scalar`.
+            let along_x = th[0].add(th[2].mul(px)).add(th[3].mul(py));
+            let along_y = th[1].add(th[4].mul(px)).add(th[5].mul(py));
+            let perspective = th[6].mul(px).add(th[7].mul(py));
+            let pred = F32x4::load_ptr(nx.add(i))
+                .mul(along_x)
+                .add(F32x4::load_ptr(ny.add(i)).mul(along_y))
+                .sub(F32x4::load_ptr(c.add(i)).mul(perspective));
+            let (mut best, mut best_h) = (inf, F32x4::splat(0.0));
+            for k in 0..MAX_CANDIDATES {
+                let hk = F32x4::load_ptr(cand_h.add(k * lanes + i));
+                let cost = hk.sub(pred).abs().add(F32x4::load_ptr(cand_pen.add(k * lanes + i)));
+                let better = cost.lt(best);
+                best = better.select(cost, best);
+                best_h = better.select(hk, best_h);
+            }
+            let valid = best.lt(inf);
+            let r = best_h.sub(pred);
+            best_h.store_ptr(h.add(i));
+            r.store_ptr(r_out.add(i));
+            valid.store_ptr(valid_out.add(i));
+            // Bin |r| · 16, the last bin taking everything beyond (and a NaN residual, which
+            // only a non-finite motion makes, and the tracker declares that lost).
+            let scaled = r.abs().mul(scale);
+            let bins = scaled.lt(top_bin).select(scaled, top_bin).to_i32_array();
+            let bits = valid.mask_bits();
+            for (l, bin) in bins.iter().enumerate() {
+                let v = (bits >> l) & 1;
+                hist[*bin as usize] += v as u16;
+                found += v as usize;
+            }
+        }
+    }
+    found
+}
+
+/// [`associate`] one point at a time, also recording the chosen candidate's index: the final
+/// association of a fit.
+fn associate_scalar(theta: &Vec8, buf: &mut FitBuffers) {
     let th: [f32; 8] = std::array::from_fn(|k| theta[k] as f32);
-    let n = buf.x.len();
-    let (x, y, nx, ny, c) = (&buf.x[..n], &buf.y[..n], &buf.nx[..n], &buf.ny[..n], &buf.c[..n]);
-    let (cand_h, cand_pen) = (&buf.cand_h[..n * MAX_CANDIDATES], &buf.cand_pen[..n * MAX_CANDIDATES]);
-    let (h, r, chosen) = (&mut buf.h[..n], &mut buf.r[..n], &mut buf.chosen[..n]);
-    for i in 0..n {
-        // n·(t + A p) − c (g·p): the normal offset the motion predicts at the point.
-        let (px, py) = (x[i], y[i]);
-        let pred = nx[i] * (th[0] + th[2] * px + th[3] * py) + ny[i] * (th[1] + th[4] * px + th[5] * py)
-            - c[i] * (th[6] * px + th[7] * py);
+    let lanes = buf.lanes;
+    for i in 0..buf.n {
+        let (px, py) = (buf.x[i], buf.y[i]);
+        let pred = buf.nx[i] * (th[0] + th[2] * px + th[3] * py) + buf.ny[i] * (th[1] + th[4] * px + th[5] * py)
+            - buf.c[i] * (th[6] * px + th[7] * py);
         let (mut best, mut best_h, mut best_k) = (f32::INFINITY, 0.0f32, -1i8);
         for k in 0..MAX_CANDIDATES {
-            let hk = cand_h[k * n + i];
-            let cost = (hk - pred).abs() + cand_pen[k * n + i];
+            let hk = buf.cand_h[k * lanes + i];
+            let cost = (hk - pred).abs() + buf.cand_pen[k * lanes + i];
             if cost < best {
                 (best, best_h, best_k) = (cost, hk, k as i8);
             }
         }
-        h[i] = best_h;
-        r[i] = best_h - pred;
-        chosen[i] = best_k;
+        buf.h[i] = best_h;
+        buf.r[i] = best_h - pred;
+        buf.valid[i] = f32::from_bits(if best_k >= 0 { u32::MAX } else { 0 });
+        buf.chosen[i] = best_k;
     }
-    let mut found = 0usize;
-    match hist {
-        Some(hist) => {
-            for (&ri, &k) in r.iter().zip(chosen.iter()) {
-                let valid = (k >= 0) as u16;
-                hist[((ri.abs() * HIST_PER_PX as f32) as usize).min(HIST_BINS - 1)] += valid;
-                found += valid as usize;
-            }
-        }
-        None => found = chosen.iter().filter(|k| **k >= 0).count(),
-    }
-    found
 }
 
 /// Robust weights of every point (0 without a candidate) into `buf.w`.
 #[inline]
 fn weigh(loss: RobustLoss, sigma: f64, buf: &mut FitBuffers) {
-    let n = buf.x.len();
-    let (r, chosen, w) = (&buf.r[..n], &buf.chosen[..n], &mut buf.w[..n]);
-    match loss {
-        RobustLoss::Tukey => {
-            let inv = (1.0 / (4.685 * sigma)) as f32;
-            for ((w, &r), &k) in w.iter_mut().zip(r).zip(chosen) {
-                let u = r * inv;
-                let t = (1.0 - u * u).max(0.0);
-                *w = if k >= 0 { t * t } else { 0.0 };
-            }
-        }
-        RobustLoss::Huber => {
-            let k_px = (1.345 * sigma) as f32;
-            for ((w, &r), &k) in w.iter_mut().zip(r).zip(chosen) {
-                let a = r.abs();
-                *w = if k < 0 { 0.0 } else if a <= k_px { 1.0 } else { k_px / a };
-            }
-        }
-        RobustLoss::LeastSquares => {
-            for (w, &k) in w.iter_mut().zip(chosen) {
-                *w = if k >= 0 { 1.0 } else { 0.0 };
-            }
+    buf.check_lanes();
+    let (r, valid, w) = (buf.r.as_ptr(), buf.valid.as_ptr(), buf.w.as_mut_ptr());
+    let one = F32x4::splat(1.0);
+    let (inv_tukey, k_huber) = (F32x4::splat((1.0 / (4.685 * sigma)) as f32), F32x4::splat((1.345 * sigma) as f32));
+    for i in (0..buf.lanes).step_by(4) {
+        // SAFETY: i + 4 <= lanes, the length of all three arrays (checked above).
+        unsafe {
+            let r = F32x4::load_ptr(r.add(i));
+            let weight = match loss {
+                RobustLoss::Tukey => {
+                    let u = r.mul(inv_tukey);
+                    let t = one.sub(u.mul(u)).max(F32x4::splat(0.0));
+                    t.mul(t)
+                }
+                RobustLoss::Huber => {
+                    let a = r.abs();
+                    a.le(k_huber).select(one, k_huber.div(a))
+                }
+                RobustLoss::LeastSquares => one,
+            };
+            weight.and(F32x4::load_ptr(valid.add(i))).store_ptr(w.add(i));
         }
     }
 }
@@ -380,32 +514,29 @@ fn weigh(loss: RobustLoss, sigma: f64, buf: &mut FitBuffers) {
 /// Moments of one side's weighted points, summed four lanes at a time.
 #[inline]
 fn side_moments(side: &FitSide, buf: &FitBuffers) -> Moments {
-    let range = side.first..side.first + side.count;
-    let (x, y, h, w) = (&buf.x[range.clone()], &buf.y[range.clone()], &buf.h[range.clone()], &buf.w[range]);
-    const L: usize = 4;
-    let mut acc = [[0.0f32; L]; 9];
-    let full = x.len() / L * L;
-    for j in (0..full).step_by(L) {
-        for l in 0..L {
-            let (xi, yi, hi, wi) = (x[j + l], y[j + l], h[j + l], w[j + l]);
-            let (wx, wy, wh) = (wi * xi, wi * yi, wi * hi);
-            acc[0][l] += wi;
-            acc[1][l] += wx;
-            acc[2][l] += wy;
-            acc[3][l] += wx * xi;
-            acc[4][l] += wx * yi;
-            acc[5][l] += wy * yi;
-            acc[6][l] += wh;
-            acc[7][l] += wh * xi;
-            acc[8][l] += wh * yi;
+    let (first, end) = (side.first, side.first + side.count);
+    let full = first + side.count / 4 * 4;
+    let zero = F32x4::splat(0.0);
+    let mut acc = [zero; 9];
+    buf.check_lanes();
+    assert!(end <= buf.lanes, "side beyond the points");
+    let (x, y, h, w) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.h.as_ptr(), buf.w.as_ptr());
+    for j in (first..full).step_by(4) {
+        // SAFETY: j + 4 <= full <= end <= lanes, the arrays' length (checked above).
+        let (xi, yi, hi, wi) =
+            unsafe { (F32x4::load_ptr(x.add(j)), F32x4::load_ptr(y.add(j)), F32x4::load_ptr(h.add(j)), F32x4::load_ptr(w.add(j))) };
+        let (wx, wy, wh) = (wi.mul(xi), wi.mul(yi), wi.mul(hi));
+        let add = [wi, wx, wy, wx.mul(xi), wx.mul(yi), wy.mul(yi), wh, wh.mul(xi), wh.mul(yi)];
+        for (a, v) in acc.iter_mut().zip(add) {
+            *a = a.add(v);
         }
     }
     let mut sum = [0.0f64; 9];
     for (s, a) in sum.iter_mut().zip(&acc) {
-        *s = a.iter().map(|v| *v as f64).sum();
+        *s = a.to_array().iter().map(|v| *v as f64).sum();
     }
-    for j in full..x.len() {
-        let (xi, yi, hi, wi) = (x[j] as f64, y[j] as f64, h[j] as f64, w[j] as f64);
+    for j in full..end {
+        let (xi, yi, hi, wi) = (buf.x[j] as f64, buf.y[j] as f64, buf.h[j] as f64, buf.w[j] as f64);
         let (wx, wy, wh) = (wi * xi, wi * yi, wi * hi);
         let add = [wi, wx, wy, wx * xi, wx * yi, wy * yi, wh, wh * xi, wh * yi];
         for (s, a) in sum.iter_mut().zip(add) {
@@ -567,6 +698,14 @@ mod tests {
         (px, py, sides)
     }
 
+    /// A whole fit as the tracker runs it: candidates in, fit, per-point results out.
+    fn run_fit(pts: &FitPoints<'_>, edges: &[PointEdges], settings: &FitSettings, buf: &mut FitBuffers) -> FitResult {
+        buf.load(pts, edges);
+        let fit = fit_motion(pts, settings, buf);
+        buf.finish();
+        fit
+    }
+
     fn settings(model: DeformationModel, loss: RobustLoss) -> FitSettings {
         FitSettings {
             model,
@@ -604,18 +743,18 @@ mod tests {
         let a = Matrix2::new(0.02, -0.03, 0.025, -0.01);
         let mut buf = FitBuffers::with_capacity(px.len());
         let edges = exact_edges(&px, &py, &sides, t, a, Vector2::zeros());
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
-        let fit = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
+        let fit = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
         assert!((fit.t - t).norm() < 1e-3, "{:?}", fit.t);
         assert!((fit.a - a).norm() < 1e-4, "{:?}", fit.a);
         // Perspective too (first-order model: exact for exact first-order data).
         let g = Vector2::new(4e-4, -3e-4);
         let edges = exact_edges(&px, &py, &sides, t, a, g);
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
         // On this symmetric rectangle translation and perspective are strongly coupled, so the
         // alternating stages need many iterations to converge (a tracker gets them over frames).
         let many = FitSettings { iterations: 400, ..settings(DeformationModel::Projective, RobustLoss::Tukey) };
-        let fit = fit_motion(&pts, &many, &mut buf);
+        let fit = run_fit(&pts, &edges, &many, &mut buf);
         assert!((fit.t - t).norm() < 1e-3 && (fit.a - a).norm() < 1e-4, "{:?} {:?}", fit.t, fit.a);
         assert!((fit.g - g).norm() < 1e-6, "{:?}", fit.g);
     }
@@ -626,18 +765,18 @@ mod tests {
         let s = settings(DeformationModel::FullVector, RobustLoss::LeastSquares);
         let mut buf = FitBuffers::with_capacity(px.len());
         let edges = exact_edges(&px, &py, &sides, Vector2::new(3.0, 1.0), Matrix2::zeros(), Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         assert!((fit.t - Vector2::new(3.0, 1.0)).norm() < 1e-4);
         assert!(fit.a.norm() < 1e-6);
         // A scaling and a rotation are recovered only in part: A.3 takes each normal offset
         // for the whole displacement and so misses the part along the side (aperture problem).
         let scale = Matrix2::new(0.02, 0.0, 0.0, 0.02);
         let edges = exact_edges(&px, &py, &sides, Vector2::zeros(), scale, Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         assert!(fit.a[(0, 0)] > 0.005 && fit.a[(0, 0)] < 0.019, "{:?}", fit.a);
         let rot = Matrix2::new(0.0, -0.02, 0.02, 0.0);
         let edges = exact_edges(&px, &py, &sides, Vector2::zeros(), rot, Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         let got = fit.a[(1, 0)] - fit.a[(0, 1)];
         assert!(got > 0.0 && got < 0.04 * 0.9, "rotation part {got}");
     }
@@ -668,16 +807,16 @@ mod tests {
                 e
             })
             .collect();
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
         let mut buf = FitBuffers::with_capacity(px.len());
-        let fit = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
+        let fit = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
         assert!((fit.t - t).norm() < 0.05 && fit.a.norm() < 1e-3, "{:?} {:?}", fit.t, fit.a);
         let wrong_choice = (0..px.len()).filter(|i| i % 5 != 2 && buf.chosen[*i] != (i % 3 == 0) as i8).count();
         assert_eq!(wrong_choice, 0);
         let outliers_weighted = (0..px.len()).filter(|i| i % 5 == 2 && buf.weight[*i] > 0.0).count();
         assert_eq!(outliers_weighted, 0);
         // Plain least squares is dragged off by the same data.
-        let ls = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::LeastSquares), &mut buf);
+        let ls = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::LeastSquares), &mut buf);
         assert!((ls.t - t).norm() > 0.1 || ls.a.norm() > 1e-2, "{:?} {:?}", ls.t, ls.a);
     }
 
@@ -692,9 +831,14 @@ mod tests {
         buf.resize(1);
         let mut edges = vec![e];
         let run = |edges: &[PointEdges], buf: &mut FitBuffers| {
-            let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side], edges };
-            buf.prepare(&pts);
-            associate(&Vec8::zeros(), buf, None)
+            let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side] };
+            buf.load(&pts, edges);
+            // The four-lane association and the final one agree.
+            let found = associate(&Vec8::zeros(), buf, &mut [0; HIST_BINS]);
+            let (h, r) = (buf.h[0], buf.r[0]);
+            associate_scalar(&Vec8::zeros(), buf);
+            assert_eq!((h, r), (buf.h[0], buf.r[0]));
+            found
         };
         assert_eq!(run(&edges, &mut buf), 1);
         assert_eq!((buf.chosen[0], buf.r[0]), (1, 1.2));

@@ -44,6 +44,7 @@ mod filter;
 mod fit;
 mod frame;
 pub mod search;
+mod simd;
 mod state;
 mod stereo;
 pub mod synth;
