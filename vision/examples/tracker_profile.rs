@@ -96,7 +96,12 @@ fn main() {
         );
     }
 
-    let mut tracker = ContourTracker::new(config, &TOP).unwrap();
+    // TRACKER_INIT_OFFSET="dx,dy": start the top face that far off (robustness checks).
+    let offset: Vec<f64> = std::env::var("TRACKER_INIT_OFFSET")
+        .map(|v| v.split(',').map(|x| x.parse().expect("TRACKER_INIT_OFFSET")).collect())
+        .unwrap_or_else(|_| vec![0.0, 0.0]);
+    let start: Vec<[f64; 2]> = TOP.iter().map(|c| [c[0] + offset[0], c[1] + offset[1]]).collect();
+    let mut tracker = ContourTracker::new(config, &start).unwrap();
     let mut worst: f64 = 0.0;
     let mut per_frame = Vec::new();
     for (k, frame) in frames.iter().enumerate() {
