@@ -192,7 +192,8 @@ pub(crate) fn search_point_with(
 ) {
     out.count = 0;
     out.outside = false;
-    if !(x.is_finite() && y.is_finite()) || x.abs() > 1e8 || y.abs() > 1e8 {
+    // Also false for NaN.
+    if !(x.abs() <= 1e8 && y.abs() <= 1e8) {
         out.outside = true;
         return;
     }
@@ -201,19 +202,14 @@ pub(crate) fn search_point_with(
     // Sample j of the line is the pixel `j - reach` steps along the axis from the base pixel.
     let reach = (side.half + 1 + PAD) as isize;
     let len = 2 * reach as usize + 1;
-    let inside_image = if side.horizontal {
-        byi >= 0 && byi < h && bxi - reach >= 0 && bxi + reach < w
-    } else {
-        bxi >= 0 && bxi < w && byi - reach >= 0 && byi + reach < h
-    };
-    if !inside_image {
+    let (along, across, along_size, across_size) = if side.horizontal { (bxi, byi, w, h) } else { (byi, bxi, h, w) };
+    if !(across >= 0 && across < across_size && along - reach >= 0 && along + reach < along_size) {
         out.outside = true;
         return;
     }
     // Normal offset of the base pixel relative to the predicted point, and per axis step; the
     // samples whose offset lies within ±search_px.
     let h0 = side.normal[0] * (bxi as f64 - x) + side.normal[1] * (byi as f64 - y);
-    let step_h = side.n_axis;
     let (k_a, k_b) = ((-search_px - h0) * side.inv_n_axis, (search_px - h0) * side.inv_n_axis);
     let k_lo = (ceil_to_isize(k_a.min(k_b)) + reach).max(PAD as isize) as usize;
     let k_hi = (floor_to_isize(k_a.max(k_b)) + reach).min((len - PAD - 1) as isize) as usize;
@@ -248,70 +244,124 @@ pub(crate) fn search_point_with(
         }
         &line[..len + SLACK]
     };
-
     // The score the wanted polarity maximises at sample k: the derivative along the axis
     // (central difference), times the sign that turns it into the outward derivative and
     // selects the polarity, or its magnitude for either polarity.
     let axis_sign: i16 = if side.n_axis >= 0.0 { 1 } else { -1 };
-    let sigma = axis_sign * outward_sign.signum() as i16;
-    // Peaks: local maxima above the threshold (`s >= threshold, s > previous, s >= next`).
-    let n = k_hi + 1 - k_lo;
-    let chunks = peak_scan(samples, k_lo, n, sigma, min_contrast, scores, masks);
-    // Keep the strongest few, the earlier one first among equals: each peak as the key
-    // `score << 8 | (255 - i)` (unique, larger is better; 0 = empty slot) through a
-    // max/min insertion network, branch-free.
-    let mut top = [0u32; MAX_CANDIDATES];
-    for (c, &mask) in masks[..chunks].iter().enumerate() {
-        let mut bits = mask;
-        while bits != 0 {
-            let i = c * 16 + bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let mut key = (scores[i] as u32) << 8 | (255 - i as u32);
-            for slot in &mut top {
-                let better = (*slot).max(key);
-                key = (*slot).min(key);
-                *slot = better;
+    let window = Window {
+        samples,
+        k_lo,
+        n: k_hi + 1 - k_lo,
+        reach,
+        inward: -(axis_sign as isize),
+        axis_sign,
+        min_contrast,
+        h0: h0 as f32,
+        step_h: side.n_axis as f32,
+        limit: search_px as f32,
+    };
+    match axis_sign * outward_sign.signum() as i16 {
+        0 => window.edges::<0>(scores, masks, out),
+        1 => window.edges::<1>(scores, masks, out),
+        _ => window.edges::<2>(scores, masks, out),
+    }
+}
+
+/// One search line's samples and window, for [`Window::edges`].
+struct Window<'a> {
+    /// The line's samples, readable `SLACK` past its end.
+    samples: &'a [u8],
+    /// The window: samples `k_lo..k_lo + n`, with `k_lo >= PAD` and `k_lo + n + PAD <=` the
+    /// line's length.
+    k_lo: usize,
+    n: usize,
+    /// Index of the base pixel.
+    reach: isize,
+    /// Step towards the contour's interior along the line (±1).
+    inward: isize,
+    axis_sign: i16,
+    min_contrast: i32,
+    /// Normal offset of the base pixel, normal offset per sample, and the search half-length.
+    h0: f32,
+    step_h: f32,
+    limit: f32,
+}
+
+impl Window<'_> {
+    /// The peaks of the score (`MODE` 0: magnitude, 1: derivative, 2: minus the derivative),
+    /// the strongest [`MAX_CANDIDATES`] of them with sub-pixel offsets, into `out`.
+    #[inline(always)]
+    fn edges<const MODE: u8>(
+        &self,
+        scores: &mut [u8; WINDOW_MAX],
+        masks: &mut [u16; WINDOW_MAX / 16],
+        out: &mut PointEdges,
+    ) {
+        let sigma: i16 = match MODE {
+            0 => 0,
+            1 => 1,
+            _ => -1,
+        };
+        // Peaks: local maxima above the threshold (`s >= threshold, s > previous, s >= next`).
+        let chunks = peak_scan(self.samples, self.k_lo, self.n, sigma, self.min_contrast, scores, masks);
+        // Keep the strongest few, the earlier one first among equals: each peak as the key
+        // `score << 8 | (255 - i)` (unique, larger is better; 0 = empty slot) through a
+        // max/min insertion network, branch-free.
+        let mut top = [0u32; MAX_CANDIDATES];
+        for (c, &mask) in masks[..chunks].iter().enumerate() {
+            let mut bits = mask;
+            while bits != 0 {
+                let i = c * 16 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let mut key = (scores[i] as u32) << 8 | (255 - i as u32);
+                for slot in &mut top {
+                    let better = (*slot).max(key);
+                    key = (*slot).min(key);
+                    *slot = better;
+                }
             }
         }
-    }
-    // The sub-pixel and appearance work for those alone. Peaks at k read samples k-3..=k+3,
-    // which PAD keeps inside the line (k_lo >= PAD, k_hi <= len - 1 - PAD).
-    debug_assert!(k_lo >= 3 && k_hi + 3 < len);
-    // SAFETY: callers pass indices within k-3..=k+3 for a peak k (see above).
-    let at = |j: usize| unsafe { *samples.get_unchecked(j) } as i16;
-    let score = |k: usize| -> i16 {
-        let d = at(k + 1) - at(k - 1);
-        if sigma == 0 { d.abs() } else { sigma * d }
-    };
-    let inward = -(axis_sign as isize);
-    let mut kept = 0usize;
-    let (h0, step_h, limit) = (h0 as f32, step_h as f32, search_px as f32);
-    for &key in &top {
-        if key == 0 {
-            break;
+        // The sub-pixel and appearance work for those alone. A peak k reads samples
+        // k-3..=k+3, inside the line (see the field docs).
+        let (samples, k_lo) = (self.samples, self.k_lo);
+        debug_assert!(k_lo >= 3 && k_lo + self.n + 3 <= samples.len());
+        // SAFETY: called with indices within k-3..=k+3 of a peak k in the window only.
+        let at = |j: usize| unsafe { *samples.get_unchecked(j) } as i16;
+        let score = |after: i16, before: i16| -> i16 {
+            match MODE {
+                0 => (after - before).abs(),
+                1 => after - before,
+                _ => before - after,
+            }
+        };
+        let mut kept = 0usize;
+        for &key in &top {
+            if key == 0 {
+                break;
+            }
+            let k = k_lo + (255 - (key & 0xff)) as usize;
+            let (s_m2, s_m1, s_0, s_p1, s_p2) = (at(k - 2), at(k - 1), at(k), at(k + 1), at(k + 2));
+            // Parabola through the peak and its neighbours (their true scores: the stored ones
+            // are clamped at 0). At a strict local maximum the denominator is negative and the
+            // vertex within ±½.
+            let (a, b, c) = (score(s_0, s_m2) as f32, (key >> 8) as f32, score(s_p2, s_0) as f32);
+            let denom = a - 2.0 * b + c;
+            let delta = if denom < 0.0 { (0.5 * (a - c) / denom).clamp(-0.5, 0.5) } else { 0.0 };
+            let h_px = self.h0 + ((k as isize - self.reach) as f32 + delta) * self.step_h;
+            if h_px.abs() > self.limit {
+                continue; // the interpolated peak slipped just past the window's end
+            }
+            let peak = b - 0.25 * (a - c) * delta;
+            let sign = if self.axis_sign * (s_p1 - s_m1) >= 0 { 1.0 } else { -1.0 };
+            let (k_in, k_out) = ((k as isize + 2 * self.inward) as usize, (k as isize - 2 * self.inward) as usize);
+            let inside = (at(k_in) + at((k_in as isize + self.inward) as usize) + 1) >> 1;
+            let outside = (at(k_out) + at((k_out as isize - self.inward) as usize) + 1) >> 1;
+            out.candidates[kept] =
+                Candidate { h_px, contrast: sign * peak, inside: inside as u8, outside: outside as u8, penalty_px: 0.0 };
+            kept += 1;
         }
-        let k = k_lo + (255 - (key & 0xff)) as usize;
-        // Parabola through the peak and its neighbours (their true scores: the stored ones
-        // are clamped at 0). At a strict local maximum the denominator is negative and the
-        // vertex within ±½.
-        let (a, b, c) = (score(k - 1) as f32, (key >> 8) as f32, score(k + 1) as f32);
-        let denom = a - 2.0 * b + c;
-        let delta = if denom < 0.0 { (0.5 * (a - c) / denom).clamp(-0.5, 0.5) } else { 0.0 };
-        let h_px = h0 + ((k as isize - reach) as f32 + delta) * step_h;
-        if h_px.abs() > limit {
-            continue; // the interpolated peak slipped just past the window's end
-        }
-        let peak = b - 0.25 * (a - c) * delta;
-        let outward_derivative = axis_sign * (at(k + 1) - at(k - 1));
-        let sign = if outward_derivative >= 0 { 1.0 } else { -1.0 };
-        let (k_in, k_out) = ((k as isize + 2 * inward) as usize, (k as isize - 2 * inward) as usize);
-        let inside = (at(k_in) + at((k_in as isize + inward) as usize) + 1) >> 1;
-        let outside = (at(k_out) + at((k_out as isize - inward) as usize) + 1) >> 1;
-        out.candidates[kept] =
-            Candidate { h_px, contrast: sign * peak, inside: inside as u8, outside: outside as u8, penalty_px: 0.0 };
-        kept += 1;
+        out.count = kept as u8;
     }
-    out.count = kept as u8;
 }
 
 /// Scores and peaks of the window `k_lo..k_lo + n` in 16-sample chunks; returns the number
