@@ -61,6 +61,10 @@ fn main() {
     }
     let dt_s = 1.0 / 30.0;
 
+    if std::env::var_os("TRACKER_GRID").is_some() {
+        robustness_grid(&frames, config);
+        return;
+    }
     let mut set = StereoTrackerSet::new();
     set.insert(Role::Gripper, View::Left, ContourTracker::new(config, &TOP).unwrap());
     set.insert(Role::Gripper, View::Right, ContourTracker::new(config, &TOP).unwrap());
@@ -140,4 +144,72 @@ fn main() {
         }
         std::fs::write(&out, text).unwrap();
     }
+}
+
+/// Tracks the top and left faces from a grid of initial offsets (and a few scalings about the
+/// face's centre) and summarises how often the top face is lost or strays >= 4 px from the
+/// ground truth (frames after 0), and how often the left face is lost.
+fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) {
+    let dt_s = 1.0 / 30.0;
+    let mut inits = Vec::new();
+    for dy in -3..=3 {
+        for dx in -3..=3 {
+            inits.push((dx as f64, dy as f64, 1.0));
+        }
+    }
+    for scale in [0.97, 1.03] {
+        for (dx, dy) in [(0.0, 0.0), (1.5, -1.0), (-1.0, 1.5)] {
+            inits.push((dx, dy, scale));
+        }
+    }
+    let place = |face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64| -> Vec<[f64; 2]> {
+        let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
+        face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
+    };
+    let (mut top_fail, mut top_lost, mut left_lost) = (Vec::new(), 0, 0);
+    let mut worsts = Vec::new();
+    for &(dx, dy, scale) in &inits {
+        let mut tracker = ContourTracker::new(config, &place(&TOP, dx, dy, scale)).unwrap();
+        let mut worst: f64 = 0.0;
+        let mut lost = false;
+        for (k, frame) in frames.iter().enumerate() {
+            if !tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
+                lost = true;
+                break;
+            }
+            if let Some((_, truth)) = TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
+                for (c, t) in tracker.corners().zip(truth) {
+                    worst = worst.max((c - Vector2::new(t[0], t[1])).norm());
+                }
+            }
+        }
+        if lost {
+            top_lost += 1;
+            top_fail.push(format!("{dx},{dy},{scale}(lost)"));
+        } else {
+            worsts.push(worst);
+            if worst >= 4.0 {
+                top_fail.push(format!("{dx},{dy},{scale}({worst:.2})"));
+            }
+        }
+        let mut left = ContourTracker::new(config, &place(&LEFT, dx, dy, scale)).unwrap();
+        for (k, frame) in frames.iter().enumerate() {
+            if !left.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
+                left_lost += 1;
+                break;
+            }
+        }
+    }
+    worsts.sort_by(f64::total_cmp);
+    let mean = worsts.iter().sum::<f64>() / worsts.len().max(1) as f64;
+    println!(
+        "grid {} runs: top fails {} (lost {}), top worst error mean {mean:.2} median {:.2} max {:.2}; left lost {}; failed: {}",
+        inits.len(),
+        top_fail.len(),
+        top_lost,
+        worsts.get(worsts.len() / 2).copied().unwrap_or(0.0),
+        worsts.last().copied().unwrap_or(0.0),
+        left_lost,
+        top_fail.join(" ")
+    );
 }
