@@ -7,7 +7,7 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_point_with, Candidate, LineScratch, PointEdges, SideGeometry};
+use super::search::{search_side, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -85,8 +85,8 @@ pub struct ContourTracker {
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
     fit: FitBuffers,
-    /// Samples of the search line being worked on.
-    line: LineScratch,
+    /// Working space of the search of one side.
+    line: SideScratch,
 }
 
 impl ContourTracker {
@@ -140,7 +140,7 @@ impl ContourTracker {
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
-            line: LineScratch::default(),
+            line: SideScratch::with_capacity(n),
         };
         tracker.restart(frame);
         tracker
@@ -255,11 +255,7 @@ impl ContourTracker {
         let orient = self.template.orientation * frame.det().signum();
         self.sides.clear();
         self.fit_sides.clear();
-        let fixed_sign = match self.config.edge_sign {
-            EdgeSign::Either => Some(0),
-            EdgeSign::Fixed(p) => Some(p.outward_sign()),
-            EdgeSign::Learned => None,
-        };
+        let min_contrast = self.config.min_contrast;
         for edge in &self.template.edges {
             // A side stays straight under the placement; its image direction is that of its
             // end points (the tangent pushed through the map's derivative in the affine case).
@@ -281,16 +277,12 @@ impl ContourTracker {
             let first = frame.image_from_template(edge.start);
             let step = frame.e1 * edge.step.x + frame.e2 * edge.step.y;
             let range = edge.first..edge.first + edge.count;
-            let (gain, tolerance) = (self.config.appearance_px_per_grey as f32, self.config.appearance_tolerance as f32);
-            let min_contrast = self.config.min_contrast;
-            // One pass over the side's points, its per-point arrays sliced once.
+            // The side's points...
             let points = self.pos_x[range.clone()]
                 .iter_mut()
                 .zip(&mut self.pos_y[range.clone()])
-                .zip(self.rel_x[range.clone()].iter_mut().zip(&mut self.rel_y[range.clone()]))
-                .zip(self.edges[range.clone()].iter_mut().zip(&self.ref_inside[range.clone()]))
-                .zip(&self.ref_contrast[range.clone()]);
-            for (k, ((((pos_x, pos_y), (rel_x, rel_y)), (found, &reference)), &ref_contrast)) in points.enumerate() {
+                .zip(self.rel_x[range.clone()].iter_mut().zip(&mut self.rel_y[range.clone()]));
+            for (k, ((pos_x, pos_y), (rel_x, rel_y))) in points.enumerate() {
                 let p = if affine {
                     first + step * k as f64
                 } else {
@@ -298,18 +290,29 @@ impl ContourTracker {
                 };
                 (*pos_x, *pos_y) = (p.x, p.y);
                 (*rel_x, *rel_y) = (p.x - frame.origin.x, p.y - frame.origin.y);
-                let sign = match fixed_sign {
-                    Some(s) => s,
-                    None if ref_contrast.abs() >= min_contrast as f32 => ref_contrast.signum() as i32,
-                    None => 0,
-                };
-                search_point_with(image, &side, p.x, p.y, search_px, sign, min_contrast, &mut self.line, found);
-                if gain > 0.0 && reference >= 0.0 {
-                    for c in &mut found.candidates[..found.count as usize] {
-                        c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
+            }
+            // ...their searches...
+            let signs = match self.config.edge_sign {
+                EdgeSign::Either => SignRule::Fixed(0),
+                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
+                EdgeSign::Learned => {
+                    SignRule::Learned { reference: &self.ref_contrast[range.clone()], min_contrast: min_contrast as f32 }
+                }
+            };
+            let (xs, ys) = (&self.pos_x[range.clone()], &self.pos_y[range.clone()]);
+            search_side(image, &side, xs, ys, search_px, signs, min_contrast, &mut self.line, &mut self.edges[range.clone()]);
+            // ...the appearance cue...
+            let (gain, tolerance) = (self.config.appearance_px_per_grey as f32, self.config.appearance_tolerance as f32);
+            if gain > 0.0 {
+                for (found, &reference) in self.edges[range.clone()].iter_mut().zip(&self.ref_inside[range.clone()]) {
+                    if reference >= 0.0 {
+                        for c in &mut found.candidates[..found.count as usize] {
+                            c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
+                        }
                     }
                 }
             }
+            // ...and the fit's copy.
             self.nrm_x[range.clone()].fill(normal[0]);
             self.nrm_y[range.clone()].fill(normal[1]);
             let geometry = (normal[0] as f32, normal[1] as f32, np as f32);

@@ -131,22 +131,75 @@ fn ceil_to_isize(x: f64) -> isize {
 /// bytes beyond it.
 const SLACK: usize = 16;
 
-/// Working space of one search line, reused from point to point (its contents beyond the
-/// current line are stale but initialised, so nothing is cleared per point).
+
+/// Bytes kept per line in [`SideScratch`]: a whole line plus the scan's slack.
+const LINE_BYTES: usize = LINE_MAX + SLACK;
+
+/// Where one point's search line lies, from the first phase of [`search_side`].
+#[derive(Debug, Clone, Copy, Default)]
+struct LinePlan {
+    /// The line leaves the image.
+    outside: bool,
+    /// The window holds no sample (`k_lo > k_hi`).
+    empty: bool,
+    /// The line's samples are read from the image at `start` (a row), not from the side's
+    /// gathered columns.
+    in_place: bool,
+    /// Offset of the line's sample 0: in the image data (in place) or in
+    /// [`SideScratch::columns`].
+    start: usize,
+    k_lo: usize,
+    k_hi: usize,
+    /// Normal offset of the base pixel from the predicted point, px.
+    h0: f64,
+}
+
+/// Working space of [`search_side`], sized at construction for the most points a side can
+/// have; reused from side to side (stale contents are initialised, nothing is cleared).
 #[derive(Debug, Clone)]
-pub(crate) struct LineScratch {
-    /// The line's samples when they cannot be read in place (a column, or a row at the very
-    /// end of the image buffer).
-    samples: [u8; LINE_MAX + SLACK],
+pub(crate) struct SideScratch {
+    plans: Vec<LinePlan>,
+    /// Each point's line, `LINE_BYTES` apart: the gathered samples of a column, or a row's
+    /// copy when it cannot be read in place (at the very end of the image buffer).
+    columns: Vec<u8>,
     /// Score of each window sample, `k_lo + i` at `i` (clamped to 0..=255: exact at peaks).
     scores: [u8; WINDOW_MAX],
     /// Peak flags, 16 window samples per entry.
     masks: [u16; WINDOW_MAX / 16],
 }
 
-impl Default for LineScratch {
-    fn default() -> Self {
-        Self { samples: [0; LINE_MAX + SLACK], scores: [0; WINDOW_MAX], masks: [0; WINDOW_MAX / 16] }
+impl SideScratch {
+    /// Room for sides of up to `points` points.
+    pub fn with_capacity(points: usize) -> Self {
+        Self {
+            plans: vec![LinePlan::default(); points],
+            columns: vec![0; points * LINE_BYTES],
+            scores: [0; WINDOW_MAX],
+            masks: [0; WINDOW_MAX / 16],
+        }
+    }
+}
+
+/// How each point of a side chooses the edge sign it accepts.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum SignRule<'a> {
+    /// The same outward sign for every point (`0` = either).
+    Fixed(i32),
+    /// Each point's learnt reference contrast: its sign once at least `min_contrast` strong,
+    /// either sign before.
+    Learned { reference: &'a [f32], min_contrast: f32 },
+}
+
+impl SignRule<'_> {
+    #[inline]
+    fn sign(&self, i: usize) -> i32 {
+        match *self {
+            SignRule::Fixed(s) => s,
+            SignRule::Learned { reference, min_contrast } => {
+                let r = reference[i];
+                if r.abs() >= min_contrast { r.signum() as i32 } else { 0 }
+            }
+        }
     }
 }
 
@@ -166,104 +219,125 @@ pub(crate) fn search_point(
     min_contrast: i32,
     out: &mut PointEdges,
 ) {
-    let mut scratch = LineScratch::default();
-    search_point_with(image, side, x, y, search_px, outward_sign, min_contrast, &mut scratch, out);
+    let mut scratch = SideScratch::with_capacity(1);
+    let rule = SignRule::Fixed(outward_sign);
+    search_side(image, side, &[x], &[y], search_px, rule, min_contrast, &mut scratch, std::slice::from_mut(out));
 }
 
-/// [`search_point`] with the caller's working space.
+/// Searches the normals of one side's points at `(xs[i], ys[i])` (see [`search_point`]) into
+/// `out[i]`.
 ///
-/// The work per point: the samples along the axis are read in place (a row) or gathered with
-/// the stride (a column, only the part the window needs); the score and the local maxima are
-/// computed sixteen samples at a time ([`peak_scan`]); the strongest few peaks get the
-/// sub-pixel and appearance work.
-// Kept out of line: the call is noise next to the work, and profiles show the search apart.
+/// Two phases: first every point's line is placed and, for a column, the samples its window
+/// needs are gathered (the strided loads of all points in one burst, and written well before
+/// they are read back); then each window is scanned: scores and local maxima sixteen samples
+/// at a time ([`peak_scan`]), and the sub-pixel and appearance work for the strongest few.
+// Kept out of line: profiles show the search apart.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-pub(crate) fn search_point_with(
+pub(crate) fn search_side(
     image: &ImageView<'_>,
     side: &SideGeometry,
-    x: f64,
-    y: f64,
+    xs: &[f64],
+    ys: &[f64],
     search_px: f64,
-    outward_sign: i32,
+    signs: SignRule<'_>,
     min_contrast: i32,
-    scratch: &mut LineScratch,
-    out: &mut PointEdges,
+    scratch: &mut SideScratch,
+    out: &mut [PointEdges],
 ) {
-    out.count = 0;
-    out.outside = false;
-    // Also false for NaN.
-    if !(x.abs() <= 1e8 && y.abs() <= 1e8) {
-        out.outside = true;
-        return;
-    }
+    let count = xs.len();
+    assert!(ys.len() == count && out.len() == count && scratch.plans.len() >= count, "side buffers too small");
     let (w, h, stride) = (image.width() as isize, image.height() as isize, image.stride());
-    let (bxi, byi) = (floor_to_isize(x + 0.5), floor_to_isize(y + 0.5));
-    // Sample j of the line is the pixel `j - reach` steps along the axis from the base pixel.
+    let data = image.data();
+    // Sample j of a line is the pixel `j - reach` steps along the axis from the base pixel.
     let reach = (side.half + 1 + PAD) as isize;
     let len = 2 * reach as usize + 1;
-    let (along, across, along_size, across_size) = if side.horizontal { (bxi, byi, w, h) } else { (byi, bxi, h, w) };
-    if !(across >= 0 && across < across_size && along - reach >= 0 && along + reach < along_size) {
-        out.outside = true;
-        return;
-    }
-    // Normal offset of the base pixel relative to the predicted point, and per axis step; the
-    // samples whose offset lies within ±search_px.
-    let h0 = side.normal[0] * (bxi as f64 - x) + side.normal[1] * (byi as f64 - y);
-    let (k_a, k_b) = ((-search_px - h0) * side.inv_n_axis, (search_px - h0) * side.inv_n_axis);
-    let k_lo = (ceil_to_isize(k_a.min(k_b)) + reach).max(PAD as isize) as usize;
-    let k_hi = (floor_to_isize(k_a.max(k_b)) + reach).min((len - PAD - 1) as isize) as usize;
-    if k_lo > k_hi {
-        return;
-    }
-    let LineScratch { samples: line, scores, masks } = scratch;
-    let data = image.data();
-    let samples: &[u8] = if side.horizontal {
-        let start = byi as usize * stride + (bxi - reach) as usize;
-        if start + len + SLACK <= data.len() {
-            &data[start..start + len + SLACK]
-        } else {
-            line[..len].copy_from_slice(&data[start..start + len]);
-            &line[..len + SLACK]
+    let (along_size, across_size) = if side.horizontal { (w, h) } else { (h, w) };
+    let SideScratch { plans, columns, scores, masks } = scratch;
+    for (i, (plan, (&x, &y))) in plans.iter_mut().zip(xs.iter().zip(ys)).enumerate() {
+        *plan = LinePlan { outside: true, ..LinePlan::default() };
+        // Also false for NaN.
+        if !(x.abs() <= 1e8 && y.abs() <= 1e8) {
+            continue;
         }
-    } else {
-        // Peaks at k use samples k-3..=k+3 (gradient neighbours, grey levels inside and
-        // outside); PAD keeps that range inside the line.
-        let start = (byi - reach) as usize * stride + bxi as usize;
-        let column = &data[start..=start + (len - 1) * stride];
-        let (first, end) = (k_lo - 3, k_hi + 4);
-        debug_assert!(end < len);
-        let mut src = column[first * stride..].as_ptr();
-        for b in &mut line[first..end] {
-            // SAFETY: the sample read is first * stride + (j - first) * stride = j * stride for
-            // j < end <= len - 1, inside `column`; advancing past the last one is not read.
-            unsafe {
-                *b = *src;
-                src = src.wrapping_add(stride);
+        let (bxi, byi) = (floor_to_isize(x + 0.5), floor_to_isize(y + 0.5));
+        let (along, across) = if side.horizontal { (bxi, byi) } else { (byi, bxi) };
+        if !(across >= 0 && across < across_size && along - reach >= 0 && along + reach < along_size) {
+            continue;
+        }
+        plan.outside = false;
+        // Normal offset of the base pixel relative to the predicted point, and the samples
+        // whose offset lies within ±search_px.
+        let h0 = side.normal[0] * (bxi as f64 - x) + side.normal[1] * (byi as f64 - y);
+        let (k_a, k_b) = ((-search_px - h0) * side.inv_n_axis, (search_px - h0) * side.inv_n_axis);
+        let k_lo = (ceil_to_isize(k_a.min(k_b)) + reach).max(PAD as isize) as usize;
+        let k_hi = (floor_to_isize(k_a.max(k_b)) + reach).min((len - PAD - 1) as isize) as usize;
+        (plan.h0, plan.k_lo, plan.k_hi) = (h0, k_lo, k_hi);
+        if k_lo > k_hi {
+            plan.empty = true;
+            continue;
+        }
+        let line = &mut columns[i * LINE_BYTES..(i + 1) * LINE_BYTES];
+        if side.horizontal {
+            let start = byi as usize * stride + (bxi - reach) as usize;
+            if start + len + SLACK <= data.len() {
+                (plan.in_place, plan.start) = (true, start);
+            } else {
+                line[..len].copy_from_slice(&data[start..start + len]);
+                (plan.in_place, plan.start) = (false, i * LINE_BYTES);
             }
+        } else {
+            // Peaks at k use samples k-3..=k+3 (gradient neighbours, grey levels inside and
+            // outside); PAD keeps that range inside the line.
+            let start = (byi - reach) as usize * stride + bxi as usize;
+            let column = &data[start..=start + (len - 1) * stride];
+            let (first, end) = (k_lo - 3, k_hi + 4);
+            debug_assert!(end < len);
+            let mut src = column[first * stride..].as_ptr();
+            for b in &mut line[first..end] {
+                // SAFETY: the sample read is first * stride + (j - first) * stride = j * stride
+                // for j < end <= len - 1, inside `column`; advancing past the last one is not
+                // read.
+                unsafe {
+                    *b = *src;
+                    src = src.wrapping_add(stride);
+                }
+            }
+            (plan.in_place, plan.start) = (false, i * LINE_BYTES);
         }
-        &line[..len + SLACK]
-    };
+    }
     // The score the wanted polarity maximises at sample k: the derivative along the axis
     // (central difference), times the sign that turns it into the outward derivative and
     // selects the polarity, or its magnitude for either polarity.
     let axis_sign: i16 = if side.n_axis >= 0.0 { 1 } else { -1 };
-    let window = Window {
-        samples,
-        k_lo,
-        n: k_hi + 1 - k_lo,
-        reach,
-        inward: -(axis_sign as isize),
-        axis_sign,
-        min_contrast,
-        h0: h0 as f32,
-        step_h: side.n_axis as f32,
-        limit: search_px as f32,
-    };
-    match axis_sign * outward_sign.signum() as i16 {
-        0 => window.edges::<0>(scores, masks, out),
-        1 => window.edges::<1>(scores, masks, out),
-        _ => window.edges::<2>(scores, masks, out),
+    for (i, (plan, out)) in plans[..count].iter().zip(out.iter_mut()).enumerate() {
+        out.count = 0;
+        out.outside = plan.outside;
+        if plan.outside || plan.empty {
+            continue;
+        }
+        let samples = if plan.in_place {
+            &data[plan.start..plan.start + len + SLACK]
+        } else {
+            &columns[plan.start..plan.start + LINE_BYTES]
+        };
+        let window = Window {
+            samples,
+            k_lo: plan.k_lo,
+            n: plan.k_hi + 1 - plan.k_lo,
+            reach,
+            inward: -(axis_sign as isize),
+            axis_sign,
+            min_contrast,
+            h0: plan.h0 as f32,
+            step_h: side.n_axis as f32,
+            limit: search_px as f32,
+        };
+        match axis_sign * signs.sign(i).signum() as i16 {
+            0 => window.edges::<0>(scores, masks, out),
+            1 => window.edges::<1>(scores, masks, out),
+            _ => window.edges::<2>(scores, masks, out),
+        }
     }
 }
 
