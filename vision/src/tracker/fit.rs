@@ -106,6 +106,9 @@ pub(crate) struct FitBuffers {
     w: Vec<f32>,
     /// The last fit's motion, robust scale and loss, for [`finish`](Self::finish).
     last: Option<(Vec8, f64, RobustLoss)>,
+    /// The residual histogram, kept here: clearing all of it per fit would cost more than
+    /// the counting.
+    bins: ResidualBins,
 }
 
 impl FitBuffers {
@@ -129,6 +132,7 @@ impl FitBuffers {
             valid: Vec::with_capacity(lanes),
             w: Vec::with_capacity(lanes),
             last: None,
+            bins: ResidualBins::default(),
         }
     }
 
@@ -196,13 +200,19 @@ impl FitBuffers {
     /// The candidate edges of the points `first..first + edges.len()`.
     pub fn set_side_candidates(&mut self, first: usize, edges: &[PointEdges]) {
         let (lanes, end) = (self.lanes, first + edges.len());
-        for k in 0..MAX_CANDIDATES {
-            let slot = k * lanes;
-            let cand_h = &mut self.cand_h[slot + first..slot + end];
-            let cand_pen = &mut self.cand_pen[slot + first..slot + end];
-            for ((h, pen), e) in cand_h.iter_mut().zip(cand_pen.iter_mut()).zip(edges) {
-                let c = &e.candidates[k];
-                (*h, *pen) = if k < e.count as usize { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
+        assert!(end <= lanes && self.cand_h.len() == lanes * MAX_CANDIDATES && self.cand_pen.len() == self.cand_h.len());
+        let (cand_h, cand_pen) = (self.cand_h.as_mut_ptr(), self.cand_pen.as_mut_ptr());
+        for (i, e) in (first..end).zip(edges) {
+            let count = e.count as usize;
+            for (k, c) in e.candidates.iter().enumerate() {
+                // Branch-free: whether a slot holds a candidate varies from point to point.
+                let (h, pen) = if k < count { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
+                // SAFETY: i < end <= lanes and k < MAX_CANDIDATES, inside both arrays
+                // (asserted above).
+                unsafe {
+                    *cand_h.add(k * lanes + i) = h;
+                    *cand_pen.add(k * lanes + i) = pen;
+                }
             }
         }
     }
@@ -319,19 +329,31 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
     let sigma_max = settings.sigma_max_px.max(settings.sigma_min_px);
     let mut sigma = sigma_max;
     let iterations = settings.iterations.max(1);
+    // Medians of 1.4826 · median > sigma_max all give sigma_max: the residual histogram
+    // only needs its bins below that, the last one taking everything beyond.
+    let mut top_bin = ((sigma_max / MAD_TO_SIGMA * HIST_PER_PX - 0.5).ceil().max(0.0) as usize).min(HIST_BINS - 1);
+    while top_bin > 0 && MAD_TO_SIGMA * ((top_bin - 1) as f64 + 0.5) / HIST_PER_PX >= sigma_max {
+        top_bin -= 1;
+    }
+    while top_bin < HIST_BINS - 1 && MAD_TO_SIGMA * (top_bin as f64 + 0.5) / HIST_PER_PX < sigma_max {
+        top_bin += 1;
+    }
     for iter in 0..iterations {
-        // 1. Association and residuals under the current motion, with their histogram.
-        let mut hist = [0u16; HIST_BINS];
-        let found = associate(&theta, buf, &mut hist);
+        // 1. Association and residuals under the current motion, with their histogram
+        // (the first iteration uses the largest scale whatever the residuals).
+        let found = if iter == 0 {
+            associate::<false>(&theta, buf)
+        } else {
+            buf.bins.clear(top_bin);
+            associate::<true>(&theta, buf)
+        };
         if found == 0 {
             buf.last = Some((theta, sigma, settings.loss));
             return result(&theta);
         }
         // 2. Robust scale 1.4826·MAD within bounds; the first iteration starts at the top so
         // that points far from the prediction still get a say.
-        let median = histogram_median(&hist, found);
-        let mad_sigma = 1.4826 * median;
-        sigma = if iter == 0 { mad_sigma.max(sigma_max) } else { mad_sigma };
+        sigma = if iter == 0 { sigma_max } else { MAD_TO_SIGMA * buf.bins.median(found) };
         sigma = sigma.clamp(settings.sigma_min_px, sigma_max);
         // 3. Weights and the moments of each side.
         let mut m = Mat8::zeros();
@@ -404,10 +426,10 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
 
 /// Gives every point the candidate closest to the motion's prediction (distance plus the
 /// candidate's penalty; the first of equals) and records its offset, residual and whether it
-/// had one; bins the absolute residuals of those that did and returns their number. Four
-/// points at a time, branch-free over the candidate slots.
+/// had one; with `BIN`, bins the absolute residuals of those that did. Returns their number.
+/// Four points at a time, branch-free over the candidate slots.
 #[inline]
-fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: &mut [u16; HIST_BINS]) -> usize {
+fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
     let th: [F32x4; 8] = std::array::from_fn(|k| F32x4::splat(theta[k] as f32));
     let lanes = buf.lanes;
     buf.check_lanes();
@@ -416,7 +438,8 @@ fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: &mut [u16; HIST_BINS]) ->
     let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
     let inf = F32x4::splat(f32::INFINITY);
     let scale = F32x4::splat(HIST_PER_PX as f32);
-    let top_bin = F32x4::splat((HIST_BINS - 1) as f32);
+    let top = F32x4::splat(buf.bins.top as f32);
+    let bins = &mut buf.bins.counts;
     let mut found = 0usize;
     for i in (0..lanes).step_by(4) {
         // SAFETY: i + 4 <= lanes and every array holds `lanes` values per slot (checked
@@ -444,15 +467,16 @@ fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: &mut [u16; HIST_BINS]) ->
             best_h.store_ptr(h.add(i));
             r.store_ptr(r_out.add(i));
             valid.store_ptr(valid_out.add(i));
-            // Bin |r| · 16, the last bin taking everything beyond (and a NaN residual, which
-            // only a non-finite motion makes, and the tracker declares that lost).
-            let scaled = r.abs().mul(scale);
-            let bins = scaled.lt(top_bin).select(scaled, top_bin).to_i32_array();
             let bits = valid.mask_bits();
-            for (l, bin) in bins.iter().enumerate() {
-                let v = (bits >> l) & 1;
-                hist[*bin as usize] += v as u16;
-                found += v as usize;
+            found += bits.count_ones() as usize;
+            if BIN {
+                // Bin |r| · 16, the top bin taking everything beyond (and a NaN residual,
+                // which only a non-finite motion makes, and the tracker declares that lost).
+                let scaled = r.abs().mul(scale);
+                let lane_bins = scaled.lt(top).select(scaled, top).to_i32_array();
+                for (l, bin) in lane_bins.iter().enumerate() {
+                    bins[*bin as usize][l] += ((bits >> l) & 1) as u16;
+                }
             }
         }
     }
@@ -554,17 +578,43 @@ fn result(theta: &Vec8) -> FitResult {
     }
 }
 
-/// Median of the values binned in `hist` (bin centre), `count` values in all.
-fn histogram_median(hist: &[u16; HIST_BINS], count: usize) -> f64 {
-    let half = count.div_ceil(2);
-    let mut seen = 0usize;
-    for (bin, &c) in hist.iter().enumerate() {
-        seen += c as usize;
-        if seen >= half {
-            return (bin as f64 + 0.5) / HIST_PER_PX;
-        }
+/// 1.4826 · MAD estimates the standard deviation of normally distributed residuals.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// The histogram of absolute residuals behind the robust scale: 1/16 px bins, `top` taking
+/// everything from there on. One count per lane of [`associate`], so that the lanes'
+/// increments (often of the same bin) do not wait on each other.
+#[derive(Debug, Clone)]
+struct ResidualBins {
+    counts: [[u16; 4]; HIST_BINS],
+    top: usize,
+}
+
+impl Default for ResidualBins {
+    fn default() -> Self {
+        Self { counts: [[0; 4]; HIST_BINS], top: HIST_BINS - 1 }
     }
-    HIST_BINS as f64 / HIST_PER_PX
+}
+
+impl ResidualBins {
+    /// Empties the bins up to `top` and makes that the last one.
+    fn clear(&mut self, top: usize) {
+        self.top = top.min(HIST_BINS - 1);
+        self.counts[..=self.top].fill([0; 4]);
+    }
+
+    /// Median of the `count` binned values (bin centre), px.
+    fn median(&self, count: usize) -> f64 {
+        let half = count.div_ceil(2);
+        let mut seen = 0usize;
+        for (bin, c) in self.counts[..=self.top].iter().enumerate() {
+            seen += c.iter().map(|v| *v as usize).sum::<usize>();
+            if seen >= half {
+                return (bin as f64 + 0.5) / HIST_PER_PX;
+            }
+        }
+        HIST_BINS as f64 / HIST_PER_PX
+    }
 }
 
 /// Adds one side's share to the normal equations `M θ = b`. A point's row is
@@ -834,7 +884,7 @@ mod tests {
             let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side] };
             buf.load(&pts, edges);
             // The four-lane association and the final one agree.
-            let found = associate(&Vec8::zeros(), buf, &mut [0; HIST_BINS]);
+            let found = associate::<true>(&Vec8::zeros(), buf);
             let (h, r) = (buf.h[0], buf.r[0]);
             associate_scalar(&Vec8::zeros(), buf);
             assert_eq!((h, r), (buf.h[0], buf.r[0]));
