@@ -10,6 +10,7 @@
 //! `±search_px` along the normal, i.e. `±search_px / |n_axis|` samples along the axis (at most
 //! 1.42x more for a 45° edge).
 
+use super::simd::F32x4;
 use crate::image::ImageView;
 
 /// Most candidate edges kept per point.
@@ -424,31 +425,42 @@ impl Window<'_> {
                 _ => before - after,
             }
         };
-        let mut kept = 0usize;
-        for &key in &top {
-            if key == 0 {
-                break;
-            }
+        // The integer part per peak (the keys are sorted, empty slots last)...
+        let peaks = top.iter().take_while(|key| **key != 0).count();
+        let (mut a, mut b, mut c, mut offset) = ([0i32; 4], [1i32; 4], [0i32; 4], [0i32; 4]);
+        let (mut sign, mut grey) = ([1.0f32; 4], [(0u8, 0u8); 4]);
+        for (j, &key) in top[..peaks].iter().enumerate() {
             let k = k_lo + (255 - (key & 0xff)) as usize;
             let (s_m2, s_m1, s_0, s_p1, s_p2) = (at(k - 2), at(k - 1), at(k), at(k + 1), at(k + 2));
-            // Parabola through the peak and its neighbours (their true scores: the stored ones
-            // are clamped at 0). At a strict local maximum the denominator is negative and the
-            // vertex within ±½.
-            let (a, b, c) = (score(s_0, s_m2) as f32, (key >> 8) as f32, score(s_p2, s_0) as f32);
-            let denom = a - 2.0 * b + c;
-            let delta = if denom < 0.0 { (0.5 * (a - c) / denom).clamp(-0.5, 0.5) } else { 0.0 };
-            let h_px = self.h0 + ((k as isize - self.reach) as f32 + delta) * self.step_h;
-            if h_px.abs() > self.limit {
-                continue; // the interpolated peak slipped just past the window's end
-            }
-            let peak = b - 0.25 * (a - c) * delta;
-            let sign = if self.axis_sign * (s_p1 - s_m1) >= 0 { 1.0 } else { -1.0 };
+            // The neighbours' true scores (the stored ones are clamped at 0).
+            (a[j], b[j], c[j]) = (score(s_0, s_m2) as i32, (key >> 8) as i32, score(s_p2, s_0) as i32);
+            offset[j] = (k as isize - self.reach) as i32;
+            sign[j] = if self.axis_sign * (s_p1 - s_m1) >= 0 { 1.0 } else { -1.0 };
             let (k_in, k_out) = ((k as isize + 2 * self.inward) as usize, (k as isize - 2 * self.inward) as usize);
             let inside = (at(k_in) + at((k_in as isize + self.inward) as usize) + 1) >> 1;
             let outside = (at(k_out) + at((k_out as isize - self.inward) as usize) + 1) >> 1;
-            out.candidates[kept] =
-                Candidate { h_px, contrast: sign * peak, inside: inside as u8, outside: outside as u8, penalty_px: 0.0 };
-            kept += 1;
+            grey[j] = (inside as u8, outside as u8);
+        }
+        // ...and the sub-pixel step for all of them at once: the parabola through each peak
+        // and its neighbours. At a strict local maximum the denominator is negative and the
+        // vertex within ±½. (The same f32 operations, in the same order, as one at a time.)
+        let (a, b, c) = (F32x4::from_i32(a), F32x4::from_i32(b), F32x4::from_i32(c));
+        let zero = F32x4::splat(0.0);
+        let denom = a.sub(F32x4::splat(2.0).mul(b)).add(c);
+        let vertex = F32x4::splat(0.5).mul(a.sub(c)).div(denom).min(F32x4::splat(0.5)).max(F32x4::splat(-0.5));
+        let delta = denom.lt(zero).select(vertex, zero);
+        let h_px = F32x4::splat(self.h0).add(F32x4::from_i32(offset).add(delta).mul(F32x4::splat(self.step_h)));
+        // An interpolated peak may slip just past the window's end: dropped.
+        let slipped = F32x4::splat(self.limit).lt(h_px.abs()).mask_bits();
+        let peak = b.sub(F32x4::splat(0.25).mul(a.sub(c)).mul(delta));
+        let (h_px, contrast) = (h_px.to_array(), peak.mul(F32x4::load_array(sign)).to_array());
+        let mut kept = 0usize;
+        for j in 0..peaks {
+            if slipped >> j & 1 == 0 {
+                let (inside, outside) = grey[j];
+                out.candidates[kept] = Candidate { h_px: h_px[j], contrast: contrast[j], inside, outside, penalty_px: 0.0 };
+                kept += 1;
+            }
         }
         out.count = kept as u8;
     }

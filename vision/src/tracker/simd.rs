@@ -82,6 +82,24 @@ impl F32x4 {
         self.0
     }
 
+    /// The lanes of an array.
+    #[inline(always)]
+    pub fn load_array(v: [f32; 4]) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        return Self(unsafe { _mm_loadu_ps(v.as_ptr()) });
+        #[cfg(not(target_arch = "x86_64"))]
+        return Self(v);
+    }
+
+    /// Lanes converted from i32 (exact below 2^24).
+    #[inline(always)]
+    pub fn from_i32(v: [i32; 4]) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        return Self(unsafe { _mm_cvtepi32_ps(_mm_loadu_si128(v.as_ptr() as *const __m128i)) });
+        #[cfg(not(target_arch = "x86_64"))]
+        return Self(v.map(|x| x as f32));
+    }
+
     /// Lanes truncated towards zero to i32, for values within i32's range.
     #[inline(always)]
     pub fn to_i32_array(self) -> [i32; 4] {
@@ -134,6 +152,15 @@ impl F32x4 {
         return Self(unsafe { _mm_max_ps(self.0, o.0) });
         #[cfg(not(target_arch = "x86_64"))]
         return Self(std::array::from_fn(|l| self.0[l].max(o.0[l])));
+    }
+
+    /// Lane-wise minimum, for operands that are not NaN (as `f32::min` then).
+    #[inline(always)]
+    pub fn min(self, o: Self) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        return Self(unsafe { _mm_min_ps(self.0, o.0) });
+        #[cfg(not(target_arch = "x86_64"))]
+        return Self(std::array::from_fn(|l| self.0[l].min(o.0[l])));
     }
 
     #[inline(always)]
@@ -214,6 +241,8 @@ mod tests {
         assert_eq!(va.mul(vb).to_array(), each(&|x, y| x * y));
         assert_eq!(va.div(vb).to_array(), each(&|x, y| x / y));
         assert_eq!(va.max(vb).to_array(), each(&|x, y| x.max(y)));
+        assert_eq!(va.min(vb).to_array(), each(&|x, y| x.min(y)));
+        assert_eq!(F32x4::from_i32([-3, 0, 7, 1 << 20]).to_array(), [-3.0, 0.0, 7.0, 1048576.0]);
         assert_eq!(va.abs().to_array(), [1.5, 2.0, f32::INFINITY, 0.25]);
         assert_eq!(va.lt(vb).mask_bits(), 0b0000);
         assert_eq!(vb.lt(va).mask_bits(), 0b0111);
