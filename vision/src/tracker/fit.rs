@@ -73,8 +73,9 @@ pub(crate) struct FitResult {
 
 /// Per-point data the fit writes, and its working copies; all sized at construction.
 ///
-/// The working copies are f32, one array per quantity so the loops run four points at a time
-/// ([`F32x4`]), padded to whole groups of four with points that have no candidate. The
+/// The working copies are f32, one array per quantity so the loops run four or eight points
+/// at a time ([`F32x4`], or AVX where the processor has it), padded to whole groups of
+/// [`LANES`] with points that have no candidate. The
 /// tracker fills them as it searches ([`set_point`](Self::set_point),
 /// [`set_candidates`](Self::set_candidates)); nothing is copied between search and fit.
 #[derive(Debug, Clone, Default)]
@@ -109,11 +110,13 @@ pub(crate) struct FitBuffers {
     /// The residual histogram, kept here: clearing all of it per fit would cost more than
     /// the counting.
     bins: ResidualBins,
+    /// The processor has AVX2: the association runs eight points at a time.
+    avx2: bool,
 }
 
 impl FitBuffers {
     pub fn with_capacity(n: usize) -> Self {
-        let lanes = n.div_ceil(4) * 4;
+        let lanes = n.div_ceil(LANES) * LANES;
         Self {
             chosen: Vec::with_capacity(n),
             residual: Vec::with_capacity(n),
@@ -133,13 +136,14 @@ impl FitBuffers {
             w: Vec::with_capacity(lanes),
             last: None,
             bins: ResidualBins::default(),
+            avx2: has_avx2(),
         }
     }
 
     /// Sets the number of points to `n` (no allocation within capacity). The padding lanes
     /// get no candidate; the points' own data is left for the caller to set.
     pub fn resize(&mut self, n: usize) {
-        let lanes = n.div_ceil(4) * 4;
+        let lanes = n.div_ceil(LANES) * LANES;
         self.chosen.resize(n, -1);
         self.residual.resize(n, 0.0);
         self.weight.resize(n, 0.0);
@@ -162,7 +166,7 @@ impl FitBuffers {
     fn check_lanes(&self) {
         let l = self.lanes;
         assert!(
-            l % 4 == 0
+            l % LANES == 0
                 && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w]
                     .iter()
                     .all(|v| v.len() == l)
@@ -430,6 +434,11 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
 /// Four points at a time, branch-free over the candidate slots.
 #[inline]
 fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if buf.avx2 {
+        // SAFETY: the processor has AVX2 (checked when the buffers were made).
+        return unsafe { associate_avx2::<BIN>(theta, buf) };
+    }
     let th: [F32x4; 8] = std::array::from_fn(|k| F32x4::splat(theta[k] as f32));
     let lanes = buf.lanes;
     buf.check_lanes();
@@ -474,6 +483,73 @@ fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
                 // which only a non-finite motion makes, and the tracker declares that lost).
                 let scaled = r.abs().mul(scale);
                 let lane_bins = scaled.lt(top).select(scaled, top).to_i32_array();
+                for (l, bin) in lane_bins.iter().enumerate() {
+                    bins[*bin as usize][l] += ((bits >> l) & 1) as u16;
+                }
+            }
+        }
+    }
+    found
+}
+
+/// [`associate`] eight points at a time with AVX (the same f32 operations per lane, so the
+/// same results).
+///
+/// # Safety
+/// The processor supports AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+    use std::arch::x86_64::*;
+    let lanes = buf.lanes;
+    buf.check_lanes();
+    let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
+    let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
+    let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let top_bin = buf.bins.top;
+    let bins = &mut buf.bins.counts;
+    let th: [__m256; 8] = std::array::from_fn(|k| _mm256_set1_ps(theta[k] as f32));
+    let inf = _mm256_set1_ps(f32::INFINITY);
+    let sign_bit = _mm256_set1_ps(-0.0);
+    let scale = _mm256_set1_ps(HIST_PER_PX as f32);
+    let top = _mm256_set1_ps(top_bin as f32);
+    let mut found = 0usize;
+    for i in (0..lanes).step_by(8) {
+        // SAFETY: i + 8 <= lanes (lanes is a multiple of 8) and every array holds `lanes`
+        // values per slot (checked above).
+        unsafe {
+            let (px, py) = (_mm256_loadu_ps(x.add(i)), _mm256_loadu_ps(y.add(i)));
+            let along_x = _mm256_add_ps(_mm256_add_ps(th[0], _mm256_mul_ps(th[2], px)), _mm256_mul_ps(th[3], py));
+            let along_y = _mm256_add_ps(_mm256_add_ps(th[1], _mm256_mul_ps(th[4], px)), _mm256_mul_ps(th[5], py));
+            let perspective = _mm256_add_ps(_mm256_mul_ps(th[6], px), _mm256_mul_ps(th[7], py));
+            let pred = _mm256_sub_ps(
+                _mm256_add_ps(
+                    _mm256_mul_ps(_mm256_loadu_ps(nx.add(i)), along_x),
+                    _mm256_mul_ps(_mm256_loadu_ps(ny.add(i)), along_y),
+                ),
+                _mm256_mul_ps(_mm256_loadu_ps(c.add(i)), perspective),
+            );
+            let (mut best, mut best_h) = (inf, _mm256_setzero_ps());
+            for k in 0..MAX_CANDIDATES {
+                let hk = _mm256_loadu_ps(cand_h.add(k * lanes + i));
+                let distance = _mm256_andnot_ps(sign_bit, _mm256_sub_ps(hk, pred));
+                let cost = _mm256_add_ps(distance, _mm256_loadu_ps(cand_pen.add(k * lanes + i)));
+                let better = _mm256_cmp_ps::<_CMP_LT_OQ>(cost, best);
+                best = _mm256_blendv_ps(best, cost, better);
+                best_h = _mm256_blendv_ps(best_h, hk, better);
+            }
+            let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(best, inf);
+            let r = _mm256_sub_ps(best_h, pred);
+            _mm256_storeu_ps(h.add(i), best_h);
+            _mm256_storeu_ps(r_out.add(i), r);
+            _mm256_storeu_ps(valid_out.add(i), valid);
+            let bits = _mm256_movemask_ps(valid) as u32;
+            found += bits.count_ones() as usize;
+            if BIN {
+                let scaled = _mm256_mul_ps(_mm256_andnot_ps(sign_bit, r), scale);
+                let capped = _mm256_blendv_ps(top, scaled, _mm256_cmp_ps::<_CMP_LT_OQ>(scaled, top));
+                let mut lane_bins = [0i32; 8];
+                _mm256_storeu_si256(lane_bins.as_mut_ptr() as *mut __m256i, _mm256_cvttps_epi32(capped));
                 for (l, bin) in lane_bins.iter().enumerate() {
                     bins[*bin as usize][l] += ((bits >> l) & 1) as u16;
                 }
@@ -578,6 +654,17 @@ fn result(theta: &Vec8) -> FitResult {
     }
 }
 
+/// Whether the processor has AVX2 (checked once per tracker, when its buffers are made).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    return false;
+}
+
+/// The working arrays are padded to a multiple of this many points (the widest loop).
+const LANES: usize = 8;
+
 /// 1.4826 · MAD estimates the standard deviation of normally distributed residuals.
 const MAD_TO_SIGMA: f64 = 1.4826;
 
@@ -586,13 +673,13 @@ const MAD_TO_SIGMA: f64 = 1.4826;
 /// increments (often of the same bin) do not wait on each other.
 #[derive(Debug, Clone)]
 struct ResidualBins {
-    counts: [[u16; 4]; HIST_BINS],
+    counts: [[u16; LANES]; HIST_BINS],
     top: usize,
 }
 
 impl Default for ResidualBins {
     fn default() -> Self {
-        Self { counts: [[0; 4]; HIST_BINS], top: HIST_BINS - 1 }
+        Self { counts: [[0; LANES]; HIST_BINS], top: HIST_BINS - 1 }
     }
 }
 
@@ -600,7 +687,7 @@ impl ResidualBins {
     /// Empties the bins up to `top` and makes that the last one.
     fn clear(&mut self, top: usize) {
         self.top = top.min(HIST_BINS - 1);
-        self.counts[..=self.top].fill([0; 4]);
+        self.counts[..=self.top].fill([0; LANES]);
     }
 
     /// Median of the `count` binned values (bin centre), px.
@@ -895,5 +982,55 @@ mod tests {
         edges[0].candidates[0].penalty_px = 0.0;
         run(&edges, &mut buf);
         assert_eq!((buf.chosen[0], buf.r[0]), (0, -1.0));
+    }
+
+    #[test]
+    fn every_association_path_gives_the_same_choices_residuals_and_histogram() {
+        // Random points and candidates (some slots empty, some tied), a random motion: the
+        // four-lane, the eight-lane (where the processor has it) and the one-at-a-time
+        // association must agree bit for bit.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let n = 61;
+        let (px, py): (Vec<f64>, Vec<f64>) = (0..n).map(|_| (next() * 200.0 - 100.0, next() * 120.0 - 60.0)).unzip();
+        let sides = [
+            FitSide { first: 0, count: 30, normal: Vector2::new(0.6, 0.8), np: 12.0 },
+            FitSide { first: 30, count: 31, normal: Vector2::new(-1.0, 0.0), np: -40.0 },
+        ];
+        let edges: Vec<PointEdges> = (0..n)
+            .map(|_| {
+                let mut e = PointEdges::default();
+                e.count = (next() * 5.0) as u8;
+                for c in &mut e.candidates[..e.count as usize] {
+                    c.h_px = ((next() * 20.0 - 10.0) * 4.0).round() as f32 / 4.0;
+                    c.penalty_px = if next() < 0.3 { (next() * 3.0) as f32 } else { 0.0 };
+                }
+                e
+            })
+            .collect();
+        let theta = Vec8::from_fn(|k, _| [1.3, -0.7, 0.02, -0.01, 0.015, 0.03, 2e-4, -1e-4][k]);
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
+        let run = |avx2: bool| {
+            let mut buf = FitBuffers::with_capacity(n);
+            buf.avx2 = avx2 && buf.avx2;
+            buf.load(&pts, &edges);
+            buf.bins.clear(40);
+            let found = associate::<true>(&theta, &mut buf);
+            (found, buf.h.clone(), buf.r.clone(), buf.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), buf)
+        };
+        let (found4, h4, r4, valid4, mut buf4) = run(false);
+        let (found8, h8, r8, valid8, buf8) = run(true);
+        assert_eq!((found4, &h4, &r4, &valid4), (found8, &h8, &r8, &valid8));
+        let total = |b: &FitBuffers| -> Vec<usize> { b.bins.counts[..=40].iter().map(|c| c.iter().map(|v| *v as usize).sum()).collect() };
+        assert_eq!(total(&buf4), total(&buf8));
+        assert!(found4 > 30 && found4 < n, "the data must mix points with and without candidates");
+        associate_scalar(&theta, &mut buf4);
+        assert_eq!((&buf4.h, &buf4.r), (&h4, &r4));
+        assert_eq!(buf4.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), valid4);
     }
 }
