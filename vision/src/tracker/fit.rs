@@ -738,43 +738,102 @@ fn accumulate_side(m: &mut Mat8, b: &mut Vec8, side: &FitSide, mo: &Moments) {
 }
 
 /// A.1: `M_tt t = b_t − M_ts s` with the shape `s` of `theta` held.
+///
+/// The small solves here are written out rather than left to nalgebra's general routines
+/// (views, copies and loops sized at run time cost more than the arithmetic); the order of
+/// operations is nalgebra's, so the results are the same.
 fn solve_translation(m: &Mat8, b: &Vec8, theta: &Vec8, wsum: f64) -> Vector2<f64> {
-    let mut mtt = m.fixed_view::<2, 2>(0, 0).into_owned();
-    let rhs = b.fixed_rows::<2>(0) - m.fixed_view::<2, 6>(0, 2) * theta.fixed_rows::<6>(2);
+    // rhs = b_t − M_ts s, the product column by column.
+    let rhs: [f64; 2] = std::array::from_fn(|i| {
+        let mut p = m[(i, 2)] * theta[2];
+        for j in 3..8 {
+            p += m[(i, j)] * theta[j];
+        }
+        b[i] - p
+    });
     // A tiny ridge keeps the motion along a lone straight side (unobservable) at zero.
-    mtt[(0, 0)] += 1e-6 * wsum;
-    mtt[(1, 1)] += 1e-6 * wsum;
-    mtt.try_inverse().map(|inv| inv * rhs).unwrap_or_else(|| Vector2::new(theta[0], theta[1]))
+    let (m11, m12, m21, m22) = (m[(0, 0)] + 1e-6 * wsum, m[(0, 1)], m[(1, 0)], m[(1, 1)] + 1e-6 * wsum);
+    let det = m11 * m22 - m21 * m12;
+    if det == 0.0 {
+        return Vector2::new(theta[0], theta[1]);
+    }
+    let inv = [[m22 / det, -m12 / det], [-m21 / det, m11 / det]];
+    Vector2::new(inv[0][0] * rhs[0] + inv[0][1] * rhs[1], inv[1][0] * rhs[0] + inv[1][1] * rhs[1])
+}
+
+/// Solves `a x = rhs` for a symmetric positive definite `a` (only its lower triangle is read)
+/// by Cholesky factorisation in place; `rhs` becomes `x`. False, with `rhs` left part-way,
+/// when `a` is not positive definite.
+fn cholesky_solve<const K: usize>(a: &mut [[f64; K]; K], rhs: &mut [f64; K]) -> bool {
+    for j in 0..K {
+        for k in 0..j {
+            let f = a[j][k];
+            for i in j..K {
+                a[i][j] += -f * a[i][k];
+            }
+        }
+        let d = a[j][j];
+        // Also false for NaN.
+        if !(d > 0.0) {
+            return false;
+        }
+        let d = d.sqrt();
+        a[j][j] = d;
+        for i in j + 1..K {
+            a[i][j] /= d;
+        }
+    }
+    // L y = rhs, then Lᵀ x = y.
+    for i in 0..K {
+        let y = rhs[i] / a[i][i];
+        rhs[i] = y;
+        for r in i + 1..K {
+            rhs[r] += -y * a[r][i];
+        }
+    }
+    for i in (0..K).rev() {
+        let mut dot = 0.0;
+        for r in i + 1..K {
+            dot += a[r][i] * rhs[r];
+        }
+        rhs[i] = (rhs[i] - dot) / a[i][i];
+    }
+    true
 }
 
 /// Translation with A.2 (`K = 6`) or with A.2 and perspective (`K = 8`) solved together:
 /// the fixed point the two stages converge to, reached in one step once the association has
 /// settled; same ridges and prior as the staged solve.
 fn solve_joint<const K: usize>(m: &Mat8, b: &Vec8, theta: &mut Vec8, wsum: f64, ridge_a: f64, ridge_g: f64) {
-    let mut mk = m.fixed_view::<K, K>(0, 0).into_owned();
-    let rhs = b.fixed_rows::<K>(0).into_owned();
-    for k in 0..K {
-        mk[(k, k)] += match k {
+    let mut mk: [[f64; K]; K] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
+    let mut rhs: [f64; K] = std::array::from_fn(|i| b[i]);
+    for (k, row) in mk.iter_mut().enumerate() {
+        row[k] += match k {
             0 | 1 => 1e-6 * wsum,
             2..=5 => ridge_a,
             _ => ridge_g,
         };
     }
-    if let Some(ch) = mk.cholesky() {
-        theta.fixed_rows_mut::<K>(0).copy_from(&ch.solve(&rhs));
+    if cholesky_solve(&mut mk, &mut rhs) {
+        for (k, v) in rhs.iter().enumerate() {
+            theta[k] = *v;
+        }
     }
 }
 
 /// A.2 (`K = 4`: `A`) or A.2 with perspective (`K = 6`: `A, g`) given the translation in
 /// `theta`, ridge-regularised towards no change of shape.
 fn solve_shape<const K: usize>(m: &Mat8, b: &Vec8, theta: &mut Vec8, ridge_a: f64, ridge_g: f64) {
-    let mut mss = m.fixed_view::<K, K>(2, 2).into_owned();
-    let rhs = b.fixed_rows::<K>(2) - m.fixed_view::<K, 2>(2, 0) * theta.fixed_rows::<2>(0);
-    for k in 0..K {
-        mss[(k, k)] += if k < 4 { ridge_a } else { ridge_g };
+    let mut mss: [[f64; K]; K] = std::array::from_fn(|i| std::array::from_fn(|j| m[(2 + i, 2 + j)]));
+    // rhs = b_s − M_st t, the product column by column.
+    let mut rhs: [f64; K] = std::array::from_fn(|i| b[2 + i] - (m[(2 + i, 0)] * theta[0] + m[(2 + i, 1)] * theta[1]));
+    for (k, row) in mss.iter_mut().enumerate() {
+        row[k] += if k < 4 { ridge_a } else { ridge_g };
     }
-    if let Some(ch) = mss.cholesky() {
-        theta.fixed_rows_mut::<K>(2).copy_from(&ch.solve(&rhs));
+    if cholesky_solve(&mut mss, &mut rhs) {
+        for (k, v) in rhs.iter().enumerate() {
+            theta[2 + k] = *v;
+        }
     }
 }
 
