@@ -7,7 +7,7 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_side, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
+use super::search::{search_side, Appearance, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -291,7 +291,7 @@ impl ContourTracker {
                 (*pos_x, *pos_y) = (p.x, p.y);
                 (*rel_x, *rel_y) = (p.x - frame.origin.x, p.y - frame.origin.y);
             }
-            // ...their searches...
+            // ...their searches (with the appearance cue)...
             let signs = match self.config.edge_sign {
                 EdgeSign::Either => SignRule::Fixed(0),
                 EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
@@ -299,19 +299,14 @@ impl ContourTracker {
                     SignRule::Learned { reference: &self.ref_contrast[range.clone()], min_contrast: min_contrast as f32 }
                 }
             };
+            let appearance = Appearance {
+                reference: &self.ref_inside[range.clone()],
+                gain: self.config.appearance_px_per_grey as f32,
+                tolerance: self.config.appearance_tolerance as f32,
+            };
             let (xs, ys) = (&self.pos_x[range.clone()], &self.pos_y[range.clone()]);
-            search_side(image, &side, xs, ys, search_px, signs, min_contrast, &mut self.line, &mut self.edges[range.clone()]);
-            // ...the appearance cue...
-            let (gain, tolerance) = (self.config.appearance_px_per_grey as f32, self.config.appearance_tolerance as f32);
-            if gain > 0.0 {
-                for (found, &reference) in self.edges[range.clone()].iter_mut().zip(&self.ref_inside[range.clone()]) {
-                    if reference >= 0.0 {
-                        for c in &mut found.candidates[..found.count as usize] {
-                            c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
-                        }
-                    }
-                }
-            }
+            let found = &mut self.edges[range.clone()];
+            search_side(image, &side, xs, ys, search_px, signs, appearance, min_contrast, &mut self.line, found);
             // ...and the fit's copy.
             self.nrm_x[range.clone()].fill(normal[0]);
             self.nrm_y[range.clone()].fill(normal[1]);

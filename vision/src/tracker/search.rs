@@ -216,6 +216,21 @@ impl SignRule<'_> {
     }
 }
 
+/// The appearance cue of a side's points: each candidate costs `gain` px per grey level by
+/// which the grey level inside it differs from the point's `reference` by more than
+/// `tolerance` (points with a negative reference have learnt none yet; gain 0 disables).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Appearance<'a> {
+    pub reference: &'a [f32],
+    pub gain: f32,
+    pub tolerance: f32,
+}
+
+impl Appearance<'_> {
+    /// No cue: every penalty 0.
+    pub const NONE: Appearance<'static> = Appearance { reference: &[], gain: 0.0, tolerance: 0.0 };
+}
+
 /// Searches one point's normal for up to [`MAX_CANDIDATES`] gradient maxima of at least
 /// `min_contrast` with the wanted outward sign (`0` = either), keeping the strongest, and
 /// writes them into `out`. `(x, y)` is the predicted point in pixels.
@@ -234,11 +249,12 @@ pub(crate) fn search_point(
 ) {
     let mut scratch = SideScratch::with_capacity(1);
     let rule = SignRule::Fixed(outward_sign);
-    search_side(image, side, &[x], &[y], search_px, rule, min_contrast, &mut scratch, std::slice::from_mut(out));
+    let out = std::slice::from_mut(out);
+    search_side(image, side, &[x], &[y], search_px, rule, Appearance::NONE, min_contrast, &mut scratch, out);
 }
 
 /// Searches the normals of one side's points at `(xs[i], ys[i])` (see [`search_point`]) into
-/// `out[i]`.
+/// `out[i]`, each candidate with its appearance penalty.
 ///
 /// Two phases: first every point's line is placed and, for a column, the samples its window
 /// needs are gathered (the strided loads of all points in one burst, and written well before
@@ -254,6 +270,7 @@ pub(crate) fn search_side(
     ys: &[f64],
     search_px: f64,
     signs: SignRule<'_>,
+    appearance: Appearance<'_>,
     min_contrast: i32,
     scratch: &mut SideScratch,
     out: &mut [PointEdges],
@@ -354,6 +371,12 @@ pub(crate) fn search_side(
             0 => window.edges::<0>(scores, masks, out),
             1 => window.edges::<1>(scores, masks, out),
             _ => window.edges::<2>(scores, masks, out),
+        }
+        if appearance.gain > 0.0 && appearance.reference[i] >= 0.0 {
+            let reference = appearance.reference[i];
+            for c in &mut out.candidates[..out.count as usize] {
+                c.penalty_px = appearance.gain * ((c.inside as f32 - reference).abs() - appearance.tolerance).max(0.0);
+            }
         }
     }
 }
