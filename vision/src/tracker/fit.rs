@@ -166,7 +166,7 @@ impl FitBuffers {
     fn check_lanes(&self) {
         let l = self.lanes;
         assert!(
-            l % LANES == 0
+            l.is_multiple_of(LANES)
                 && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w]
                     .iter()
                     .all(|v| v.len() == l)
@@ -764,6 +764,8 @@ fn solve_translation(m: &Mat8, b: &Vec8, theta: &Vec8, wsum: f64) -> Vector2<f64
 /// Solves `a x = rhs` for a symmetric positive definite `a` (only its lower triangle is read)
 /// by Cholesky factorisation in place; `rhs` becomes `x`. False, with `rhs` left part-way,
 /// when `a` is not positive definite.
+// Two indices into one matrix read more plainly than iterator chains here.
+#[allow(clippy::needless_range_loop)]
 fn cholesky_solve<const K: usize>(a: &mut [[f64; K]; K], rhs: &mut [f64; K]) -> bool {
     for j in 0..K {
         for k in 0..j {
@@ -773,8 +775,7 @@ fn cholesky_solve<const K: usize>(a: &mut [[f64; K]; K], rhs: &mut [f64; K]) -> 
             }
         }
         let d = a[j][j];
-        // Also false for NaN.
-        if !(d > 0.0) {
+        if d <= 0.0 || d.is_nan() {
             return false;
         }
         let d = d.sqrt();
@@ -1063,8 +1064,7 @@ mod tests {
         ];
         let edges: Vec<PointEdges> = (0..n)
             .map(|_| {
-                let mut e = PointEdges::default();
-                e.count = (next() * 5.0) as u8;
+                let mut e = PointEdges { count: (next() * 5.0) as u8, ..Default::default() };
                 for c in &mut e.candidates[..e.count as usize] {
                     c.h_px = ((next() * 20.0 - 10.0) * 4.0).round() as f32 / 4.0;
                     c.penalty_px = if next() < 0.3 { (next() * 3.0) as f32 } else { 0.0 };

@@ -9,6 +9,12 @@
 //! `h = n·(p_edge − x)`, computed from the row sample's true position. The search covers
 //! `±search_px` along the normal, i.e. `±search_px / |n_axis|` samples along the axis (at most
 //! 1.42x more for a 45° edge).
+//!
+//! A side's points share their normal and axis, so `search_side` takes them together, in
+//! two phases: place every line (and gather each column window, its strided loads in one
+//! burst), then scan each window: scores and local maxima sixteen samples at a time
+//! (`peak_scan`), the strongest [`MAX_CANDIDATES`] by a branch-free network, and their
+//! sub-pixel steps four at a time (`Window::edges`).
 
 use super::simd::F32x4;
 use crate::image::ImageView;
@@ -226,6 +232,7 @@ pub(crate) struct Appearance<'a> {
     pub tolerance: f32,
 }
 
+#[cfg(test)]
 impl Appearance<'_> {
     /// No cue: every penalty 0.
     pub const NONE: Appearance<'static> = Appearance { reference: &[], gain: 0.0, tolerance: 0.0 };
