@@ -148,7 +148,7 @@ pub fn select_matches(cands: &Candidates, friends: &[Friendship], planes: &[Plan
 /// Reconstructs every match in place (see the module docs).
 #[allow(clippy::too_many_arguments)] // the planner's stage outputs, passed as they are
 pub fn reconstruct(matches: &mut [Match], facets: &[Facet], friends: &[Friendship], left: &[Segment], right: &[Segment], geo: &StereoGeometry, epipolar_min_angle_deg: f64, junction_gap_px: f64) {
-    let ef = EpipolarFrame::new(&geo.epipolar);
+    let ef = geo.frame();
     let mut by_cand = std::collections::HashMap::with_capacity(matches.len());
     for (i, m) in matches.iter().enumerate() {
         by_cand.insert(m.candidate, i);
