@@ -36,8 +36,11 @@
 //! symmetric: yaw 0 closes the jaws along robot `x`.
 
 mod planview;
+pub mod scene;
 #[cfg(test)]
 mod tests;
+
+pub use scene::{scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};
 use thiserror::Error;

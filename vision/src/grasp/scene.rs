@@ -1,0 +1,269 @@
+//! From the planner's reconstruction of one stereo pair ([`crate::planner::Plan`]) to the
+//! grasp planner's [`GraspScene`]: facets as 3-D polygons with their boundary sides as
+//! edges, the reconstructed segments that lie on no facet as loose edges, and one connected
+//! component per object.
+//!
+//! # Choices
+//! - **Facet edges are the polygon's sides** (thesis 5.6.2, the facet boundary
+//!   description): the planner extends segment ends to their junctions, so the sides reach the
+//!   corners where the matched segments stop short of them, and every facet has a complete
+//!   boundary to find its top edge on.
+//! - **Components**: the planner joins facets that share a segment or meet at a junction seen
+//!   in both views; a loose segment joins the component of any facet member (or other loose
+//!   segment) it meets at such a junction ("friends"), so that an edge seen behind a facet is
+//!   on its object, as the rear-edge rule needs. A loose segment that meets nothing is an
+//!   object of its own: an obstacle only.
+//! - **Height limit**: features whose lowest point is above `max_height_m` are dropped. The
+//!   arm parked above the workspace is in view while the planner looks; it moves away before
+//!   the grasp, so it is no obstacle (the gripper itself is masked out of the images before
+//!   planning).
+//! - A facet whose polygon is degenerate in 3-D (under 1 mm², or with no corner to anchor its
+//!   frame) is dropped rather than failing the whole plan; its polygon is rotated so that its
+//!   first vertex is a proper corner (the facet frame `facet_st` is anchored there), and the
+//!   image polygons are rotated the same way.
+
+use nalgebra::Vector3;
+
+use super::{GraspScene, SceneEdge, SceneFacet, Segment3};
+use crate::planner::Plan;
+
+/// A facet of the scene with where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FacetSource {
+    /// Index into `Plan::facets`.
+    pub plan_facet: usize,
+    /// The facet's outline in the left and right image, in the planner's pixel convention,
+    /// vertex for vertex with the scene facet's `polygon_m` (same first vertex, same order).
+    pub left_px: Vec<[f64; 2]>,
+    pub right_px: Vec<[f64; 2]>,
+}
+
+/// A [`GraspScene`] built from a plan, with the image polygons of its facets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedScene {
+    pub scene: GraspScene,
+    /// One per `scene.facets`.
+    pub facets: Vec<FacetSource>,
+    /// Index into `Plan::matches` of each of `scene.edges`.
+    pub edge_matches: Vec<usize>,
+    /// Plan facets left out (no robot coordinates, degenerate, or above the height limit).
+    pub dropped_facets: Vec<usize>,
+}
+
+struct UnionFind(Vec<usize>);
+
+impl UnionFind {
+    fn find(&mut self, mut i: usize) -> usize {
+        while self.0[i] != i {
+            self.0[i] = self.0[self.0[i]];
+            i = self.0[i];
+        }
+        i
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (a, b) = (self.find(a), self.find(b));
+        if a != b {
+            self.0[a.max(b)] = a.min(b);
+        }
+    }
+}
+
+fn v3(p: &[f64; 3]) -> Vector3<f64> {
+    Vector3::new(p[0], p[1], p[2])
+}
+
+/// Index of the first vertex whose neighbours are not in line with it (a proper corner), if
+/// any: the facet frame `polygon[0]`, `polygon[1] − polygon[0]`, `polygon[n−1] − polygon[0]`
+/// needs one.
+fn anchor_corner(poly: &[Vector3<f64>]) -> Option<usize> {
+    let n = poly.len();
+    // The most bent corner is the best-conditioned frame; ties keep the earliest.
+    let bend = |i: usize| {
+        let (o, u, v) = (poly[i], poly[(i + 1) % n], poly[(i + n - 1) % n]);
+        let (a, b) = (u - o, v - o);
+        let d = a.norm() * b.norm();
+        if d > 0.0 { a.cross(&b).norm() / d } else { 0.0 }
+    };
+    let best = (0..n).max_by(|&a, &b| bend(a).total_cmp(&bend(b)).then(b.cmp(&a)))?;
+    (bend(best) > 0.05).then_some(best)
+}
+
+/// Newell area (twice the area's norm) of a 3-D polygon, m².
+fn area_m2(poly: &[Vector3<f64>]) -> f64 {
+    let mut n = Vector3::zeros();
+    for i in 0..poly.len() {
+        n += poly[i].cross(&poly[(i + 1) % poly.len()]);
+    }
+    0.5 * n.norm()
+}
+
+/// Builds the grasp scene of `plan` (which must have been made with an affine model, so that
+/// facets and matches carry robot coordinates; without one the scene is empty).
+/// `toward_viewer` is [`crate::affine::AffineStereo::toward_cameras`]; features entirely above
+/// `max_height_m` are left out (see the module docs).
+pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f64) -> PlannedScene {
+    let n_facets = plan.facets.len();
+    let n_matches = plan.matches.len();
+    // Nodes: plan facets, then matches. Facets with the planner's component id are joined.
+    let mut uf = UnionFind((0..n_facets + n_matches).collect());
+    let mut first_of_component: Vec<Option<usize>> = Vec::new();
+    for (fi, f) in plan.facets.iter().enumerate() {
+        let c = f.facet.component as usize;
+        if first_of_component.len() <= c {
+            first_of_component.resize(c + 1, None);
+        }
+        match first_of_component[c] {
+            Some(other) => uf.union(fi, other),
+            None => first_of_component[c] = Some(fi),
+        }
+    }
+    let mut match_of_candidate = std::collections::HashMap::new();
+    for (mi, m) in plan.matches.iter().enumerate() {
+        match_of_candidate.insert(m.candidate, mi);
+        for &f in &m.facets {
+            if (f as usize) < n_facets {
+                uf.union(n_facets + mi, f as usize);
+            }
+        }
+    }
+    for fr in &plan.friends {
+        if let (Some(&a), Some(&b)) = (match_of_candidate.get(&fr.a), match_of_candidate.get(&fr.b)) {
+            uf.union(n_facets + a, n_facets + b);
+        }
+    }
+
+    let mut facets = Vec::new();
+    let mut sources = Vec::new();
+    let mut dropped = Vec::new();
+    for (fi, f) in plan.facets.iter().enumerate() {
+        let Some(corners) = &f.corners_robot_m else {
+            dropped.push(fi);
+            continue;
+        };
+        let poly: Vec<Vector3<f64>> = corners.iter().map(v3).collect();
+        let usable = poly.len() >= 3
+            && poly.len() == f.facet.left.len()
+            && poly.len() == f.facet.right.len()
+            && poly.iter().all(|p| p.iter().all(|x| x.is_finite()))
+            && area_m2(&poly) >= 1e-6
+            && poly.iter().map(|p| p.z).fold(f64::INFINITY, f64::min) <= max_height_m;
+        let Some(start) = usable.then(|| anchor_corner(&poly)).flatten() else {
+            dropped.push(fi);
+            continue;
+        };
+        let rotate = |v: &[[f64; 2]]| -> Vec<[f64; 2]> { (0..v.len()).map(|k| v[(start + k) % v.len()]).collect() };
+        let polygon_m: Vec<Vector3<f64>> = (0..poly.len()).map(|k| poly[(start + k) % poly.len()]).collect();
+        let n = polygon_m.len();
+        let edges = (0..n).map(|k| Segment3::new(polygon_m[k], polygon_m[(k + 1) % n])).filter(|s| s.length_m() >= 1e-6).collect();
+        facets.push((uf.find(fi), SceneFacet { polygon_m, edges, component: 0 }));
+        sources.push(FacetSource { plan_facet: fi, left_px: rotate(&f.facet.left), right_px: rotate(&f.facet.right) });
+    }
+    let mut edges = Vec::new();
+    let mut edge_matches = Vec::new();
+    for (mi, m) in plan.matches.iter().enumerate() {
+        if !m.facets.is_empty() {
+            continue; // on a facet: its polygon's sides stand for it
+        }
+        let Some(ends) = m.reconstruction.as_ref().and_then(|r| r.robot_m) else { continue };
+        let (a, b) = (v3(&ends[0]), v3(&ends[1]));
+        if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) || (b - a).norm() < 1e-6 || a.z.min(b.z) > max_height_m {
+            continue;
+        }
+        edges.push((uf.find(n_facets + mi), Segment3::new(a, b)));
+        edge_matches.push(mi);
+    }
+    // Dense component ids in order of first appearance.
+    let mut ids: Vec<usize> = Vec::new();
+    let mut id_of = |root: usize| match ids.iter().position(|&r| r == root) {
+        Some(i) => i,
+        None => {
+            ids.push(root);
+            ids.len() - 1
+        }
+    };
+    let facets: Vec<SceneFacet> = facets.into_iter().map(|(root, f)| SceneFacet { component: id_of(root), ..f }).collect();
+    let edges: Vec<SceneEdge> = edges.into_iter().map(|(root, segment)| SceneEdge { segment, component: id_of(root) }).collect();
+    PlannedScene { scene: GraspScene { facets, edges, toward_viewer }, facets: sources, edge_matches, dropped_facets: dropped }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::affine::AffineStereo;
+    use crate::grasp::{plan_grasps, GraspConfig};
+    use crate::planner::synth::{BoxSpec, SynthScene};
+    use crate::planner::{Planner, PlannerConfig, StereoGeometry};
+
+    fn plan_scene(boxes: Vec<BoxSpec>, seed: u64) -> (PlannedScene, Plan) {
+        let synth = SynthScene::new(boxes);
+        let pair = synth.render(seed);
+        let robot: Vec<Vector3<f64>> = pair.cage.iter().map(|c| Vector3::from(c.0)).collect();
+        let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
+        let model = AffineStereo::fit(&robot, &image).unwrap();
+        let toward = model.toward_cameras();
+        let geo = StereoGeometry::from_model(model, 0.5, 10.0);
+        let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
+        (scene_from_plan(&plan, toward, 1.0), plan)
+    }
+
+    /// The grasp rules on real planner output: a 40 x 30 x 45 mm box seen by the synthetic
+    /// rig (cameras towards −y, above). Its two visible side faces are graspable, across the
+    /// box's other dimension, and the whole chain holds: facets and their top edges, rear edge
+    /// on the top face of the same component, width within a few mm of the box, tool at the
+    /// low-water mark, the image polygons vertex for vertex with the 3-D ones.
+    #[test]
+    fn a_planned_box_is_grasped_across_a_side() {
+        let b = BoxSpec { center_m: [0.0, 0.0, 0.0225], size_m: [0.040, 0.030, 0.045], yaw_rad: 0.5 };
+        let (ps, plan) = plan_scene(vec![b], 3);
+        assert_eq!(plan.facets.len(), 3, "top and two sides");
+        assert_eq!(ps.scene.facets.len(), 3, "dropped {:?}", ps.dropped_facets);
+        assert!(ps.scene.facets.iter().all(|f| f.component == ps.scene.facets[0].component), "one object");
+        for (f, s) in ps.scene.facets.iter().zip(&ps.facets) {
+            assert_eq!(f.polygon_m.len(), s.left_px.len());
+            assert_eq!(f.polygon_m.len(), s.right_px.len());
+        }
+        let grasps = plan_grasps(&ps.scene, None, &GraspConfig::default()).unwrap();
+        assert_eq!(grasps.candidates.len(), 2, "both side faces: {:?}", grasps.rejected);
+        for g in &grasps.candidates {
+            // Across the 40 mm or the 30 mm extent, whichever is behind the face.
+            let n = g.site.jaw_axis;
+            let ax = Vector3::new(0.5f64.cos(), 0.5f64.sin(), 0.0);
+            let expected = if n.dot(&ax).abs() > 0.7 { 0.040 } else { 0.030 };
+            assert!((g.site.width_m - expected).abs() < 0.004, "width {:.1} mm, expected {expected}", g.site.width_m * 1e3);
+            assert!((g.site.front_m.z - 0.045).abs() < 0.003, "site on the top edge: {:?}", g.site.front_m);
+            assert!((g.tool_m.z - 0.020).abs() < 0.003, "tool at the low-water mark");
+            let c = g.site.centre_m;
+            assert!(c.x.hypot(c.y) < 0.006, "centred on the box: {c:?}");
+        }
+        // The horizontal top face is a facet, but not a graspable one.
+        assert!(grasps.rejected.iter().any(|r| matches!(r.reason, crate::grasp::RejectReason::FacetNotVertical { .. })));
+    }
+
+    /// Two boxes apart: a separate component each, and the indicated point picks the grasp.
+    #[test]
+    fn the_box_nearest_the_indicated_point_is_chosen_from_planner_output() {
+        let a = BoxSpec { center_m: [-0.05, 0.0, 0.02], size_m: [0.035, 0.035, 0.04], yaw_rad: 0.4 };
+        let b = BoxSpec { center_m: [0.05, 0.01, 0.02], size_m: [0.03, 0.04, 0.04], yaw_rad: -0.3 };
+        let (ps, _) = plan_scene(vec![a, b], 5);
+        let comps: std::collections::BTreeSet<usize> = ps.scene.facets.iter().map(|f| f.component).collect();
+        assert_eq!(comps.len(), 2, "two objects");
+        let cfg = GraspConfig::default();
+        for (target, point) in [(a, Vector3::new(-0.07, -0.01, 0.06)), (b, Vector3::new(0.07, 0.02, 0.06))] {
+            let g = plan_grasps(&ps.scene, Some(&point), &cfg).unwrap().chosen.expect("a grasp");
+            let c = g.site.centre_m;
+            let d = (c.x - target.center_m[0]).hypot(c.y - target.center_m[1]);
+            assert!(d < 0.008, "grasp centre {c:?} is {:.1} mm from the box nearest {point:?}", d * 1e3);
+        }
+    }
+
+    #[test]
+    fn features_above_the_height_limit_are_left_out() {
+        let b = BoxSpec { center_m: [0.0, 0.0, 0.0225], size_m: [0.040, 0.030, 0.045], yaw_rad: 0.5 };
+        let (_, plan) = plan_scene(vec![b], 3);
+        let low = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 0.030);
+        // The top face (z = 45 mm) goes; the sides reach down to the table and stay.
+        assert_eq!(low.scene.facets.len(), 2, "{:?}", low.dropped_facets);
+        assert_eq!(low.dropped_facets.len(), 1);
+        assert!(low.scene.facets.iter().all(|f| f.polygon_m.iter().any(|p| p.z < 0.01)));
+    }
+}
