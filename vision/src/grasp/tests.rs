@@ -264,3 +264,26 @@ fn bad_input_is_a_named_error() {
     // An empty scene is no error, just no grasp.
     assert!(plan_grasps(&scene(vec![], vec![]), None, &cfg).unwrap().chosen.is_none());
 }
+
+#[test]
+fn loose_edges_hit_fingers_and_facets_hit_the_body() {
+    // A loose edge of another object 10 mm behind cube A, 30 mm up (above the 15 mm
+    // low-water mark), across the rear finger's path: a finger collision with that edge.
+    let bar = SceneEdge { segment: Segment3::new(p(-0.01, -0.02, 0.03), p(-0.01, 0.06, 0.03)), component: 5 };
+    let hit = plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![bar]));
+    assert!(reasons_for(&hit, 0).contains(&RejectReason::FingerCollision { feature: FeatureRef::Edge(EdgeRef::Loose(0)) }), "{:?}", hit.rejected);
+    assert!(hit.chosen.is_none());
+    // The same edge 10 mm up stays below the low-water mark.
+    let low = SceneEdge { segment: Segment3::new(p(-0.01, -0.02, 0.01), p(-0.01, 0.06, 0.01)), component: 5 };
+    assert!(plan(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![low])).chosen.is_some());
+    // A wall 25 mm behind A: past the fingers (they reach 20 mm behind the back face), inside
+    // the body's 100 mm. Taller than the high-water mark (65 mm) its facet hits the body.
+    let wall = |h: f64| facet(vec![p(-0.025, -0.03, 0.0), p(-0.025, 0.07, 0.0), p(-0.025, 0.07, h), p(-0.025, -0.03, h)], 6);
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.push(wall(0.08));
+    let tall = plan(&scene(f, vec![]));
+    assert!(reasons_for(&tall, 0).contains(&RejectReason::BodyCollision { feature: FeatureRef::Facet(2) }), "{:?}", tall.rejected);
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.push(wall(0.06));
+    assert!(plan(&scene(f, vec![])).candidates.iter().any(|g| g.site.facet == 0));
+}
