@@ -49,6 +49,7 @@ pub struct DaemonConfig {
     pub calibration: CalibrationConfig,
     pub acquire: AcquireConfig,
     pub target: TargetConfig,
+    pub plan: PlanSettings,
     pub servo: ServoSettings,
     pub grasp: GraspConfig,
     pub safety: SafetyConfig,
@@ -67,6 +68,7 @@ impl Default for DaemonConfig {
             calibration: CalibrationConfig::default(),
             acquire: AcquireConfig::default(),
             target: TargetConfig::default(),
+            plan: PlanSettings::default(),
             servo: ServoSettings::default(),
             grasp: GraspConfig::default(),
             safety: SafetyConfig::default(),
@@ -203,6 +205,61 @@ pub struct TargetConfig {
 impl Default for TargetConfig {
     fn default() -> Self {
         Self { converge_frames: 15, min_score: 0.35, max_epipolar_px: 8.0, timeout_s: 10.0 }
+    }
+}
+
+/// The plan phase: one stereo pair to the planner, the grasp chosen (thesis ch. 5-6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlanSettings {
+    /// Where the tool waits while the planner looks, robot frame, m: clear of the blocks, the
+    /// gripper still in view (its trackers keep running). Empty = where the calibration
+    /// parked it.
+    pub park_m: Vec<f64>,
+    /// Frames the arm must be still before the stereo pair is taken.
+    pub settle_frames: u32,
+    /// Tolerance of the weak epipolar constraint for stereo matches, px.
+    pub epipolar_tol_px: f64,
+    /// The cage's disparity range is widened by this fraction of it on each side, plus
+    /// `disparity_margin_px` (the blocks lie below the cage).
+    pub disparity_margin: f64,
+    pub disparity_margin_px: f64,
+    /// The region of the images masked out before planning: this box around the gripper's
+    /// reference point (plate centre), in plate axes `a` (along the plate, horizontal), `b`
+    /// (up) and `n` (the plate normal, the jaws' closing axis), each `[min, max]`, m,
+    /// projected with the calibrated model and widened by `mask_margin_px`. It covers the
+    /// plate, the palm and the open fingers of the simulator's gripper.
+    pub mask_box_m: [[f64; 2]; 3],
+    pub mask_margin_px: f64,
+    /// Features whose lowest point is higher than the parked tool point less this are the arm
+    /// (it moves away before the grasp), not obstacles, m.
+    pub arm_clearance_m: f64,
+    /// Finger cross-section of the grasp planner's gripper model: along the closing axis and
+    /// along the edge, m.
+    pub finger_thickness_m: f64,
+    pub finger_breadth_m: f64,
+    /// Widest grasp the planner accepts (the thesis's 50 mm), m.
+    pub max_width_m: f64,
+    /// Time-out of the phase (park, settle, plan), s.
+    pub timeout_s: f64,
+}
+
+impl Default for PlanSettings {
+    fn default() -> Self {
+        Self {
+            park_m: Vec::new(),
+            settle_frames: 5,
+            epipolar_tol_px: 3.0,
+            disparity_margin: 0.5,
+            disparity_margin_px: 10.0,
+            mask_box_m: [[-0.035, 0.035], [-0.11, 0.04], [-0.125, 0.012]],
+            mask_margin_px: 6.0,
+            arm_clearance_m: 0.02,
+            finger_thickness_m: 0.012,
+            finger_breadth_m: 0.020,
+            max_width_m: 0.050,
+            timeout_s: 20.0,
+        }
     }
 }
 
@@ -419,6 +476,11 @@ impl DaemonConfig {
             ("calibration.point_timeout_s", self.calibration.point_timeout_s),
             ("acquire.timeout_s", self.acquire.timeout_s),
             ("target.timeout_s", self.target.timeout_s),
+            ("plan.timeout_s", self.plan.timeout_s),
+            ("plan.epipolar_tol_px", self.plan.epipolar_tol_px),
+            ("plan.finger_thickness_m", self.plan.finger_thickness_m),
+            ("plan.finger_breadth_m", self.plan.finger_breadth_m),
+            ("plan.max_width_m", self.plan.max_width_m),
             ("servo.max_step_m", self.servo.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),
             ("servo.timeout_s", self.servo.timeout_s),
@@ -446,6 +508,22 @@ impl DaemonConfig {
         }
         if !(self.calibration.park_m.is_empty() || self.calibration.park_m.len() == 3) {
             return bad("calibration.park_m", format!("{:?}", self.calibration.park_m), "empty or [x, y, z]");
+        }
+        if !(self.plan.park_m.is_empty() || self.plan.park_m.len() == 3) {
+            return bad("plan.park_m", format!("{:?}", self.plan.park_m), "empty or [x, y, z]");
+        }
+        if self.plan.mask_box_m.iter().flatten().any(|v| !v.is_finite()) || self.plan.mask_box_m.iter().any(|r| r[0] > r[1]) {
+            return bad("plan.mask_box_m", format!("{:?}", self.plan.mask_box_m), "three finite [min, max] ranges");
+        }
+        for (field, v) in [
+            ("plan.disparity_margin", self.plan.disparity_margin),
+            ("plan.disparity_margin_px", self.plan.disparity_margin_px),
+            ("plan.mask_margin_px", self.plan.mask_margin_px),
+            ("plan.arm_clearance_m", self.plan.arm_clearance_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, v.to_string(), "a finite number >= 0");
+            }
         }
         if self.calibration.samples == 0 {
             return bad("calibration.samples", "0".into(), ">= 1");

@@ -78,6 +78,13 @@ impl<J: Send + 'static, R: Send + 'static> Worker<J, R> {
         self.in_flight() > 0
     }
 
+    /// Whether a job is queued or being computed now (submitted, its result not yet
+    /// produced). Unlike [`Self::busy`], a finished result waiting to be collected does not
+    /// count: this is what telemetry's `planning` flag shows.
+    pub fn computing(&self) -> bool {
+        self.in_flight() > self.results.len() as u64
+    }
+
     /// Waits for every queued job to finish and returns their results (for shutdown, never
     /// from the hard loop).
     pub fn finish(mut self) -> Vec<R> {
@@ -125,7 +132,7 @@ mod tests {
         for _ in 0..1000 {
             assert_eq!(w.try_result(), None, "nothing can be done before the release");
         }
-        assert!(w.busy());
+        assert!(w.busy() && w.computing());
         let accepted = w.in_flight();
         for _ in 0..accepted {
             release_tx.send(()).unwrap();
@@ -138,6 +145,18 @@ mod tests {
             std::thread::yield_now();
         }
         assert_eq!(results[0], 2, "jobs finish in order");
+        assert!(!w.busy() && !w.computing());
+    }
+
+    #[test]
+    fn a_finished_result_waiting_to_be_collected_is_not_computing() {
+        let mut w = Worker::spawn("double", 1, |x: u32| 2 * x).unwrap();
+        w.try_submit(4).unwrap();
+        while w.computing() {
+            std::thread::yield_now();
+        }
+        assert!(w.busy(), "the result is not collected yet");
+        assert_eq!(w.try_result(), Some(8));
         assert!(!w.busy());
     }
 

@@ -133,6 +133,10 @@ pub struct GripperModel {
     pub finger_breadth_m: f64,
     /// How far each finger opens beyond its contact surface before closing.
     pub finger_clearance_m: f64,
+    /// A gripper that can only open fully: the jaws' inner faces are this far apart before
+    /// closing, whatever the width, and each finger's clearance is what is left beside the
+    /// grasp (`finger_clearance_m` is then unused). `None`: width plus both clearances.
+    pub jaw_opening_m: Option<f64>,
     /// Widest grasp.
     pub max_width_m: f64,
 }
@@ -147,6 +151,7 @@ impl Default for GripperModel {
             finger_thickness_m: 0.010,
             finger_breadth_m: 0.020,
             finger_clearance_m: 0.010,
+            jaw_opening_m: None,
             max_width_m: 0.050,
         }
     }
@@ -309,6 +314,11 @@ impl GraspConfig {
             ("contact_tolerance_m", self.contact_tolerance_m),
             ("max_rear_drop_m", self.max_rear_drop_m),
         ];
+        if let Some(o) = g.jaw_opening_m
+            && !(o > 0.0 && o.is_finite() && o >= g.max_width_m)
+        {
+            return Err(GraspError::Config { field: "gripper.jaw_opening_m", value: o });
+        }
         for (field, value) in positive {
             if !(value > 0.0 && value.is_finite()) {
                 return Err(GraspError::Config { field, value });
@@ -554,8 +564,9 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
                     continue;
                 }
                 let w = width_m.max(0.0);
+                let clearance = g.jaw_opening_m.map_or(g.finger_clearance_m, |o| (0.5 * (o - w)).max(0.0));
                 let frame = PlanFrame { centre: centre_m, jaw, along };
-                let (inner, outer, half_b) = (0.5 * w + config.contact_tolerance_m, 0.5 * w + g.finger_clearance_m + g.finger_thickness_m, 0.5 * g.finger_breadth_m);
+                let (inner, outer, half_b) = (0.5 * w + config.contact_tolerance_m, 0.5 * w + clearance + g.finger_thickness_m, 0.5 * g.finger_breadth_m);
                 let fingers = [Rect { g: [-outer, -inner], h: [-half_b, half_b] }, Rect { g: [inner, outer], h: [-half_b, half_b] }];
                 let contact = |f: FeatureRef| match f {
                     FeatureRef::Facet(i) => i == fi,
@@ -574,7 +585,7 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
                     site,
                     tool_m: centre_m - Vector3::new(0.0, 0.0, g.finger_depth_m),
                     yaw_rad: symmetric_yaw(jaw[1].atan2(jaw[0])),
-                    opening_m: w + 2.0 * g.finger_clearance_m,
+                    opening_m: w + 2.0 * clearance,
                     approach: -Vector3::z(),
                 });
             }

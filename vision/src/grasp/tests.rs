@@ -287,3 +287,23 @@ fn loose_edges_hit_fingers_and_facets_hit_the_body() {
     f.push(wall(0.06));
     assert!(plan(&scene(f, vec![])).candidates.iter().any(|g| g.site.facet == 0));
 }
+
+#[test]
+fn a_gripper_that_only_opens_fully_sweeps_its_fingers_out_to_the_full_opening() {
+    // Cube A and a block B 25 mm behind it, 30 mm tall (above the low-water mark). With the
+    // default 10 mm clearance the rear finger reaches 20 mm behind A: clear. Opening fully
+    // to 80 mm it reaches 20 + 12 mm behind A and hits B.
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.extend(block([-0.065, -0.025], [-0.01, 0.05], 0.03, 1));
+    let s = scene(f, vec![]);
+    assert!(plan(&s).candidates.iter().any(|g| g.site.facet == 0 && (g.opening_m - 0.06).abs() < 1e-12));
+    let full = GraspConfig { gripper: GripperModel { jaw_opening_m: Some(0.08), finger_thickness_m: 0.012, ..Default::default() }, ..Default::default() };
+    let p = plan_grasps(&s, None, &full).unwrap();
+    assert!(p.candidates.iter().all(|g| g.site.facet != 0), "{:?}", p.candidates);
+    assert!(reasons_for(&p, 0).iter().any(|r| matches!(r, RejectReason::FingerCollision { .. })));
+    // Without B, the grasp opens to 80 mm.
+    let alone = plan_grasps(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![]), None, &full).unwrap();
+    assert!((alone.chosen.unwrap().opening_m - 0.08).abs() < 1e-12);
+    let bad = GraspConfig { gripper: GripperModel { jaw_opening_m: Some(0.03), ..Default::default() }, ..Default::default() };
+    assert!(matches!(plan_grasps(&s, None, &bad), Err(GraspError::Config { field: "gripper.jaw_opening_m", .. })));
+}
