@@ -83,6 +83,12 @@ impl HardLoop {
         })
     }
 
+    /// The operator's indicated point on the working plane (robot frame, m): the plan phase
+    /// executes the grasp site nearest it (without one, the highest).
+    pub fn set_indicated_point(&mut self, point_m: Option<[f64; 3]>) {
+        self.mission.indicated_m = point_m;
+    }
+
     /// One robot state sample (the transport drains them all before each cycle). A reading
     /// that makes no sense stops the arm at the next cycle.
     pub fn robot_state(&mut self, s: &RobotState) {

@@ -3,8 +3,9 @@
 //! Per stereo frame ([`hard_loop::HardLoop::cycle`]): update the gripper and target trackers
 //! over the frame's pixels in place, check safety, run the current [`phase`], answer the
 //! frame with exactly one robot command and publish one telemetry sample. Phases: acquire
-//! gripper → calibrate → acquire target (operator hint) → coplanarity servo → grasp → lift
-//! → done (or failed / stopped, with a reason). Work longer than a frame runs on a
+//! gripper → calibrate → plan (the grasp planner on one stereo pair, while the gripper stays
+//! tracked; skipped when an operator hint names the target) → acquire target → coplanarity
+//! servo → grasp → lift → done (or failed / stopped, with a reason). Work longer than a frame runs on a
 //! [`worker`] thread; report images are encoded on another ([`report`]). [`service`] runs it
 //! all against the `handeye/*` services of a domain, whoever publishes them.
 
@@ -14,6 +15,7 @@ pub mod hard_loop;
 pub mod hint;
 pub mod outcome;
 pub mod phase;
+pub mod planning;
 pub mod recovery;
 pub mod report;
 pub mod safety;

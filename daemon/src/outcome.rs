@@ -3,7 +3,8 @@
 use serde::Serialize;
 
 use crate::hard_loop::HardLoop;
-use crate::phase::{CalibrationStats, ServoTraceRow};
+use crate::phase::{CalibrationStats, PlanningStats, ServoTraceRow, TargetSource};
+use crate::planning::PlanSummary;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct DaemonOutcome {
@@ -25,6 +26,12 @@ pub struct DaemonOutcome {
     pub cycles: u64,
     pub robot_states: u64,
     pub calibration: Option<CalibrationStats>,
+    /// Where the target came from: `hint` or `plan` (`None`: never chosen).
+    pub target_source: Option<TargetSource>,
+    /// The planner's facets, candidates and rejections (plan phase only).
+    pub plan: Option<PlanSummary>,
+    /// The loop while the planner worked: frames answered, gripper tracker updates.
+    pub planning: Option<PlanningStats>,
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
@@ -54,6 +61,9 @@ impl DaemonOutcome {
             cycles: t.count(),
             robot_states: l.robot_states(),
             calibration: l.mission.calibration.as_ref().map(|c| c.stats),
+            target_source: l.mission.target.as_ref().map(|t| t.source),
+            plan: l.mission.plan.clone(),
+            planning: l.mission.planning,
             grip_width_mm: l.mission.grip_width_m.map(|w| w * 1e3),
             stop_frame_id: l.stopped_at_frame(),
             recoveries: l.recoveries,

@@ -45,6 +45,8 @@ impl Snapshot {
 pub enum ReportJob {
     Overlay(Box<Snapshot>),
     ServoPlot(Vec<ServoTraceRow>),
+    /// The planner's facets and grasp sites on both views (`NN_plan.png`) and `plan.json`.
+    Plan(Box<crate::planning::PlanOutput>),
 }
 
 /// Writes report files on its own thread; the loop hands jobs over without waiting.
@@ -68,6 +70,14 @@ impl ReportWriter {
             ReportJob::ServoPlot(rows) => {
                 let path = out.join("servo_error.png");
                 servo_plot(&rows).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
+            }
+            ReportJob::Plan(p) => {
+                count += 1;
+                let json = out.join("plan.json");
+                let text = serde_json::to_string_pretty(&p.summary).map_err(|e| format!("{}: {e}", json.display()))?;
+                std::fs::write(&json, text).map_err(|e| format!("{}: {e}", json.display()))?;
+                let path = out.join(format!("{count:02}_plan.png"));
+                plan_overlay(&p).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
             }
         })?;
         Ok(Self { worker, dir: dir.to_path_buf(), dropped: 0 })
@@ -135,6 +145,88 @@ pub fn overlay(s: &Snapshot) -> RgbImage {
         for i in 0..pts.len() {
             let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
             draw_line(&mut img, a, b, colour);
+        }
+    }
+    img
+}
+
+/// Distinct colours for the planner's facets.
+const FACET_COLOURS: [Rgb<u8>; 8] = [
+    Rgb([60, 180, 75]),
+    Rgb([0, 130, 200]),
+    Rgb([245, 130, 48]),
+    Rgb([145, 30, 180]),
+    Rgb([70, 240, 240]),
+    Rgb([240, 50, 230]),
+    Rgb([210, 245, 60]),
+    Rgb([0, 128, 128]),
+];
+const CHOSEN: Rgb<u8> = Rgb([255, 30, 30]);
+const CANDIDATE: Rgb<u8> = Rgb([255, 255, 255]);
+const REJECTED: Rgb<u8> = Rgb([255, 200, 0]);
+const MASK: Rgb<u8> = Rgb([90, 90, 160]);
+const INDICATED: Rgb<u8> = Rgb([255, 0, 255]);
+
+fn polygon(img: &mut RgbImage, poly: &[[f64; 2]], dx: f64, colour: Rgb<u8>) {
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        draw_line(img, [a[0] + dx, a[1]], [b[0] + dx, b[1]], colour);
+    }
+}
+
+fn cross(img: &mut RgbImage, p: [f64; 2], dx: f64, r: f64, colour: Rgb<u8>) {
+    draw_line(img, [p[0] + dx - r, p[1] - r], [p[0] + dx + r, p[1] + r], colour);
+    draw_line(img, [p[0] + dx - r, p[1] + r], [p[0] + dx + r, p[1] - r], colour);
+}
+
+fn ring(img: &mut RgbImage, p: [f64; 2], dx: f64, r: f64, colour: Rgb<u8>) {
+    let n = 24;
+    for i in 0..n {
+        let (a0, a1) = (std::f64::consts::TAU * i as f64 / n as f64, std::f64::consts::TAU * (i + 1) as f64 / n as f64);
+        draw_line(img, [p[0] + dx + r * a0.cos(), p[1] + r * a0.sin()], [p[0] + dx + r * a1.cos(), p[1] + r * a1.sin()], colour);
+    }
+}
+
+/// The plan on both views (as the planner saw them, the gripper masked): the masked region
+/// (blue-grey), every facet in its own colour (grey when it was left out of the grasp
+/// scene), the target facet's tracker outline (red), rejected sites (yellow crosses),
+/// candidate sites (white rings), the chosen site (red ring and cross) and the indicated
+/// point (magenta cross).
+pub fn plan_overlay(p: &crate::planning::PlanOutput) -> RgbImage {
+    let (w, h) = (p.images[0].width as u32, p.images[0].height as u32);
+    let mut img = RgbImage::new(2 * w, h);
+    for (k, view) in p.images.iter().enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                let g = view.get(x as usize, y as usize);
+                img.put_pixel(k as u32 * w + x, y, Rgb([g, g, g]));
+            }
+        }
+    }
+    let s = &p.summary;
+    for k in 0..2 {
+        let dx = f64::from(k as u32 * w);
+        polygon(&mut img, &s.masks_px[k], dx, MASK);
+        for (i, f) in s.facets.iter().enumerate() {
+            let colour = if f.component.is_some() { FACET_COLOURS[i % FACET_COLOURS.len()] } else { Rgb([120, 120, 120]) };
+            polygon(&mut img, if k == 0 { &f.left_px } else { &f.right_px }, dx, colour);
+        }
+        if let Some(t) = &p.target {
+            polygon(&mut img, if k == 0 { &t.left_px } else { &t.right_px }, dx, CHOSEN);
+        }
+        let at = |site: &crate::planning::SiteSummary| if k == 0 { site.site_left_px } else { site.site_right_px };
+        for r in &s.rejected_sites {
+            cross(&mut img, at(r), dx, 2.0, REJECTED);
+        }
+        for c in &s.candidates {
+            ring(&mut img, at(c), dx, 4.0, CANDIDATE);
+        }
+        if let Some(c) = &s.chosen {
+            ring(&mut img, at(c), dx, 6.0, CHOSEN);
+            cross(&mut img, at(c), dx, 3.0, CHOSEN);
+        }
+        if let Some(ip) = s.indicated_px {
+            cross(&mut img, ip[k], dx, 5.0, INDICATED);
         }
     }
     img

@@ -47,6 +47,8 @@ pub struct ServiceOptions {
     pub domain: Domain,
     pub config: DaemonConfig,
     pub hint: Option<OperatorHint>,
+    /// The operator's indicated point (robot frame, m): the plan executes the grasp nearest it.
+    pub indicated_point_m: Option<[f64; 3]>,
     /// Report folder (overlays, servo plot); `None` = no report images.
     pub report_dir: Option<PathBuf>,
 }
@@ -70,6 +72,7 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     let start_timeout = Duration::from_secs_f64(options.config.start_timeout_s);
     let mut report = options.report_dir.as_deref().map(ReportWriter::new).transpose()?;
     let mut hl = HardLoop::new(options.config, options.hint)?;
+    hl.set_indicated_point(options.indicated_point_m);
     let mut got_frame = false;
     let send = |commands: &mut MessagePublisher<RobotCommand>, telemetry: &mut MessagePublisher<Telemetry>, cmd: &RobotCommand, t: &Telemetry| {
         telemetry.send(t).map_err(|e| ServiceError::Send(e.to_string()))?;
@@ -114,6 +117,11 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                     && let Some(rep) = report.as_mut()
                 {
                     rep.submit(ReportJob::Overlay(Box::new(Snapshot::take(label, &left, &right, &t))));
+                }
+                if let Some(plan) = hl.mission.plan_report.take()
+                    && let Some(rep) = report.as_mut()
+                {
+                    rep.submit(ReportJob::Plan(plan));
                 }
                 drop(frame);
                 if hl.finished() {

@@ -16,6 +16,16 @@
 //! between the facet and the face opposite it), and the tool point's lateral offset from
 //! the facet's centre.
 //!
+//! The facet judged is the one the daemon's target trackers were put on: when they first
+//! appear in telemetry, their outlines are matched against every block face's projection
+//! (ground truth) in both views ([`DaemonWatch::targeted`]: which block and face, and whether
+//! it is the task's target). With an operator hint that is the hinted facet; when the daemon
+//! plans its own grasp it is whatever the planner chose.
+//!
+//! While the daemon plans (phase `plan`), it records how many frames the planner worked
+//! (telemetry `planning` = 1) and how far the gripper trackers' update counts rose
+//! meanwhile ([`PlanWatch`]): the daemon must keep tracking while it plans.
+//!
 //! It also records when each phase first appeared, when the daemon stopped or failed (and
 //! why), the first `Stop` command, and, when the scenario has an occluder, the first frame on
 //! which an occluder hides the target facet (fewer than half of its pixels at hint time
@@ -44,6 +54,37 @@ pub struct ConvergedPlacement {
     pub tool_z_mm: f64,
 }
 
+/// The facet the daemon's target trackers were put on, from ground truth.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TargetedFacet {
+    pub frame: u64,
+    pub block: String,
+    pub face: String,
+    /// Whether that block is the task's target.
+    pub is_task_target: bool,
+    /// Mean distance of the trackers' corners from the face's projected outline, px (both
+    /// views): how well the daemon placed them.
+    pub outline_error_px: f64,
+}
+
+/// The daemon's telemetry during its plan phase.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct PlanWatch {
+    /// Telemetry samples with phase `plan`.
+    pub frames: u64,
+    /// ... of which with `planning` = 1 (the planner busy).
+    pub planning_frames: u64,
+    /// Gripper tracker updates (left, right) from the first to the last `planning` frame.
+    pub gripper_updates_while_planning: [u64; 2],
+    /// Largest jump of a gripper tracker's update count between consecutive `planning`
+    /// frames (1 when it updated on every frame).
+    pub max_update_step: u64,
+    #[serde(skip)]
+    first: Option<[u64; 2]>,
+    #[serde(skip)]
+    last: Option<[u64; 2]>,
+}
+
 /// What the simulator saw of the daemon (serialised into the sim's verdict).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct DaemonWatch {
@@ -61,6 +102,9 @@ pub struct DaemonWatch {
     pub target_hidden_frame: Option<u64>,
     /// Telemetry samples read.
     pub telemetry: u64,
+    /// The facet the target trackers were put on.
+    pub targeted: Option<TargetedFacet>,
+    pub plan: PlanWatch,
     #[serde(skip)]
     facet: Option<HintFacet>,
     #[serde(skip)]
@@ -109,6 +153,41 @@ impl DaemonWatch {
     pub fn telemetry(&mut self, sim: &Simulator, frame: u64, t: &Telemetry) {
         self.telemetry += 1;
         let Some(phase) = Phase::from_u32(t.phase) else { return };
+        if phase == Phase::Plan {
+            self.plan.frames += 1;
+            if t.planning == 1 {
+                self.plan.planning_frames += 1;
+                let now = [t.tracker_updates[0], t.tracker_updates[1]];
+                if let Some(last) = self.plan.last {
+                    let step = (0..2).map(|k| now[k].saturating_sub(last[k])).max().unwrap_or(0);
+                    self.plan.max_update_step = self.plan.max_update_step.max(step);
+                }
+                let first = *self.plan.first.get_or_insert(now);
+                self.plan.last = Some(now);
+                self.plan.gripper_updates_while_planning = [now[0].saturating_sub(first[0]), now[1].saturating_sub(first[1])];
+            }
+        }
+        if self.targeted.is_none() && t.tracker_state[2] != 0 && t.tracker_state[3] != 0 {
+            let poly = |i: usize| -> Vec<[f64; 2]> {
+                t.tracker_corners_px[i].iter().filter(|c| c[0].is_finite() && c[1].is_finite()).map(|c| [f64::from(c[0]), f64::from(c[1])]).collect()
+            };
+            let (l, r) = (poly(2), poly(3));
+            if l.len() >= 3
+                && r.len() >= 3
+                && let Some((facet, error)) = identify_facet(sim, &l, &r)
+            {
+                let b = &sim.world.blocks[facet.block];
+                self.targeted = Some(TargetedFacet {
+                    frame,
+                    block: b.name.clone(),
+                    face: b.shape.faces[facet.face].name.to_string(),
+                    is_task_target: facet.block == sim.target_index(),
+                    outline_error_px: error,
+                });
+                // Judge the placement against the facet the daemon actually works on.
+                self.facet = Some(facet);
+            }
+        }
         if self.last_phase != Some(t.phase) {
             if !self.phases.iter().any(|(n, _)| n == phase.name()) {
                 self.phases.push((phase.name().to_string(), frame));
@@ -159,4 +238,57 @@ impl DaemonWatch {
             tool_z_mm: tool.z * 1e3,
         })
     }
+}
+
+/// Distance of point `p` from the closed polygon's outline.
+fn outline_distance(poly: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let n = poly.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (poly[i], poly[(i + 1) % n]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l2 = dx * dx + dy * dy;
+            let t = if l2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0) } else { 0.0 };
+            (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The block face whose projected outline best fits the tracked polygons (both views, pixel
+/// centres at integers, as the daemon's trackers report them): the smallest mean distance
+/// of the tracked corners from the face's outline, over faces facing both cameras. With the
+/// face, that mean distance in pixels. The facet's depth is the block's extent behind it.
+pub fn identify_facet(sim: &Simulator, left: &[[f64; 2]], right: &[[f64; 2]]) -> Option<(HintFacet, f64)> {
+    let cams = &sim.events.cameras;
+    let mut best: Option<(HintFacet, f64)> = None;
+    for (bi, b) in sim.world.blocks.iter().enumerate() {
+        let (_, pose) = sim.block_pose(bi);
+        let corners: Vec<DVec3> = b.shape.corners.iter().map(|&c| pose.transform_point3(c)).collect();
+        for (fi, face) in b.shape.faces.iter().enumerate() {
+            let n = (pose.matrix3 * face.normal).normalize();
+            let pts: Vec<DVec3> = face.corners.iter().map(|&c| corners[c]).collect();
+            let centre = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+            if cams.iter().any(|cam| n.dot(cam.position_m - centre) <= 0.0) {
+                continue;
+            }
+            let mut error = 0.0;
+            let mut count = 0;
+            for (cam, tracked) in cams.iter().zip([left, right]) {
+                let Some(proj) = pts.iter().map(|&p| cam.project(p)).collect::<Option<Vec<[f64; 2]>>>() else { continue };
+                for &c in tracked {
+                    error += outline_distance(&proj, c);
+                    count += 1;
+                }
+            }
+            if count == 0 {
+                continue;
+            }
+            let error = error / count as f64;
+            if best.as_ref().is_none_or(|(_, e)| error < *e) {
+                let depth_m = corners.iter().map(|&c| n.dot(centre - c)).fold(0.0, f64::max);
+                best = Some((HintFacet { block: bi, face: fi, normal: n, depth_m }, error));
+            }
+        }
+    }
+    best
 }

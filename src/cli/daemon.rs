@@ -20,13 +20,17 @@ use super::domain::DomainArgs;
 /// stale_frame_ms (default 100 ms), the camera or robot goes away, or the robot faults.
 ///
 /// Phases: acquire_gripper (open/close the jaws, locate the fingers, track the plate) →
-/// calibrate (visit the cage, fit the affine stereo model) → acquire_target (trackers on the
-/// operator hint's facet) → servo (coplanarity, look-and-move) → grasp → lift → done; or
-/// failed / stopped with a reason. Exit status 0 when done, 2 when failed or stopped.
+/// calibrate (visit the cage, fit the affine stereo model) → plan (one stereo pair to the
+/// planner on a worker thread, the gripper masked out and still tracked at frame rate:
+/// facets, grasp sites, the site nearest --point chosen; skipped with --hint) →
+/// acquire_target (trackers on the chosen facet, or the hint's) → servo (coplanarity,
+/// look-and-move) → grasp → lift → done; or failed / stopped with a reason. Exit status 0
+/// when done, 2 when failed or stopped.
 ///
 /// Examples:
+///   handeye daemon --point 0.43,0.05 --out out/report
 ///   handeye daemon --hint out/hint.json --out out/report
-///   handeye daemon --domain lab --config daemon.toml --hint hint.json --json
+///   handeye daemon --domain lab --config daemon.toml --point 0.40,-0.02,0.06 --json
 #[derive(Args)]
 pub struct DaemonArgs {
     /// Configuration (TOML): gripper model, calibration cage in robot coordinates, gains,
@@ -35,16 +39,26 @@ pub struct DaemonArgs {
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Operator hint (JSON): the target facet's corners in both views and its depth in mm
-    /// (`handeye sim --hint-out` writes one). Read once at start-up.
-    #[arg(long, value_name = "FILE")]
+    /// (`handeye sim --hint-out` writes one). Read once at start-up. With a hint nothing is
+    /// planned; without one the daemon plans its own grasp.
+    #[arg(long, value_name = "FILE", conflicts_with = "point")]
     hint: Option<PathBuf>,
-    /// Report folder: overlay PNGs of both views at key moments (trackers drawn), the servo
-    /// error plot (servo_error.png) and daemon.json (the outcome).
+    /// The operator's indicated point on the working plane, robot frame, metres: `X,Y` or
+    /// `X,Y,Z` (Z defaults to 0). The plan executes the grasp site whose centre is nearest
+    /// it in plan view; without it, the highest site.
+    #[arg(long, value_name = "X,Y[,Z]", value_parser = parse_point)]
+    point: Option<[f64; 3]>,
+    /// Report folder: overlay PNGs of both views at key moments (trackers drawn), the plan
+    /// (NN_plan.png: facets, grasp sites, the chosen one; plan.json), the servo error plot
+    /// (servo_error.png) and daemon.json (the outcome).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Print the outcome as one JSON object: success, phase_reached, final_phase,
     /// failure_reason, servo_steps, loop_us_p50/p99/max/mean, deadline_misses, cycles,
-    /// calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), servo_trace, wall_s.
+    /// calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), target_source
+    /// (hint or plan), plan (facets, candidates, chosen site, rejected sites and counts by
+    /// reason, planner_ms), planning (frames answered and gripper tracker updates while the
+    /// planner worked), servo_trace, wall_s.
     #[arg(long)]
     json: bool,
     /// Print the effective configuration as TOML and exit.
@@ -67,7 +81,13 @@ pub fn run(args: DaemonArgs) -> Result<()> {
     if !args.json {
         eprintln!("daemon: waiting for frames in domain '{}'", args.domain.domain);
     }
-    let result = run_service(ServiceOptions { domain: args.domain.domain.clone(), config, hint, report_dir: args.out.clone() })?;
+    let result = run_service(ServiceOptions {
+        domain: args.domain.domain.clone(),
+        config,
+        hint,
+        indicated_point_m: args.point,
+        report_dir: args.out.clone(),
+    })?;
     let o = &result.outcome;
     if let Some(dir) = &args.out {
         let path = dir.join("daemon.json");
@@ -95,4 +115,17 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         std::process::exit(2);
     }
     Ok(())
+}
+
+/// `X,Y` or `X,Y,Z` in metres.
+pub fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if !(2..=3).contains(&parts.len()) {
+        return Err(format!("'{text}': expected X,Y or X,Y,Z in metres"));
+    }
+    let mut p = [0.0; 3];
+    for (i, s) in parts.iter().enumerate() {
+        p[i] = s.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| format!("'{s}' in '{text}' is not a number of metres"))?;
+    }
+    Ok(p)
 }

@@ -16,28 +16,41 @@ use serde_json::{json, Value};
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
 /// as two child processes in a private domain, talking only over shared memory.
 ///
-/// The simulator writes the operator hint (the target facet in both views, ±3 px per corner,
-/// and its depth ±2 mm) before its first frame and judges the run from ground truth: success
-/// (the target lifted 50 mm and held 2 s), and, at the moment the daemon's telemetry says the
-/// servo converged, final_plane_error_mm (distance of the gripper plate's centre from the
-/// target facet's plane: the servo makes them coplanar) and final_angle_error_deg (angle
-/// between the plate's normal, the jaws' closing axis, and the facet's normal). The daemon
-/// gets the frames, the robot state, the hint and its configuration (the scenario's cage);
+/// The daemon plans its own grasp (thesis ch. 6): after calibrating it hands one stereo
+/// pair to the planner, keeps tracking the gripper meanwhile, and executes the grasp site
+/// nearest the operator's indicated point: the scenario's `[task] point_m`, or the named
+/// target block's centre (where an operator would point), on the working plane (the lower
+/// cage points' height). With --hint it uses the operator hint instead (the target facet
+/// clicked in both views, ±3 px per corner, its depth ±2 mm), which the simulator writes
+/// before its first frame either way (hint.json).
+///
+/// The simulator judges the run from ground truth: success (the task's target — the named
+/// block, or the block nearest the indicated point — lifted 50 mm and held 2 s); the facet
+/// the daemon's target trackers were put on (block, face, whether it is the task's
+/// target); at the moment the daemon's telemetry says the servo converged,
+/// final_plane_error_mm (distance of the gripper plate's centre from that facet's plane: the
+/// servo makes them coplanar) and final_angle_error_deg (angle between the plate's normal,
+/// the jaws' closing axis, and the facet's normal). The daemon gets the frames, the robot
+/// state, the indicated point (or the hint) and its configuration (the scenario's cage);
 /// never ground truth.
 ///
-/// Prints a summary, or with --json one object: success, phase_reached, failure_reason,
-/// servo_steps, final_plane_error_mm, final_angle_error_deg, grasp_plane_error_mm (jaw-centre
-/// plane from the block's mid-plane when the jaws closed), loop_us_p50, loop_us_p99,
-/// deadline_misses, calibration_residual_px, sim_frames, wall_s, seed, report (folder or null).
+/// Prints a summary, or with --json one object: success, phase_reached, final_phase,
+/// failure_reason, target_source (plan or hint), target_block, targeted_block,
+/// targeted_face, indicated_point_m, plan_candidates, planner_ms, planning_frames,
+/// gripper_updates_while_planning, servo_steps, final_plane_error_mm, final_angle_error_deg,
+/// grasp_plane_error_mm (jaw-centre plane from the block's mid-plane when the jaws closed),
+/// loop_us_p50, loop_us_p99, deadline_misses, calibration_residual_px, sim_frames, wall_s,
+/// seed, report (folder or null).
 ///
 /// The children are always cleaned up: on Ctrl-C, on failure, and after --timeout-s (a hung
 /// child is killed). Their stderr is kept in the report folder (sim.stderr.log,
 /// daemon.stderr.log). Exit status 0 on success, 2 when the run failed.
 ///
 /// Examples:
-///   handeye run scenarios/pick_cube.toml
+///   handeye run scenarios/clutter3.toml --out out/clutter3
+///   handeye run scenarios/clutter3.toml --seed 7 --random-layout --json
 ///   handeye run scenarios/pick_cube.toml --seed 7 --json
-///   handeye run scenarios/pick_cube_bump.toml --out out/bump
+///   handeye run scenarios/pick_cube_bump.toml --hint --out out/bump
 #[derive(Args)]
 pub struct RunArgs {
     /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
@@ -45,7 +58,8 @@ pub struct RunArgs {
     /// Print one JSON object (see above) instead of the summary.
     #[arg(long)]
     json: bool,
-    /// Report folder: overlay PNGs of both views at key moments with the trackers drawn,
+    /// Report folder: overlay PNGs of both views at key moments with the trackers drawn, the
+    /// plan (NN_plan.png: facets, grasp sites, the chosen one, the indicated point; plan.json),
     /// servo_error.png, daemon.json, sim.json, run.json, hint.json, daemon.toml, and both
     /// children's stderr. Without it, everything goes to a temporary folder that is removed.
     #[arg(long, value_name = "DIR")]
@@ -57,6 +71,14 @@ pub struct RunArgs {
     /// hint's errors. Default: the scenario as written.
     #[arg(long)]
     seed: Option<u64>,
+    /// With --seed: a random layout of all the blocks instead (see `handeye sim --help`);
+    /// with an indicated point, a random target with the point within 15 mm of it.
+    #[arg(long, requires = "seed")]
+    random_layout: bool,
+    /// Give the daemon the operator hint (the target facet clicked in both views) instead of
+    /// letting it plan its own grasp.
+    #[arg(long)]
+    hint: bool,
     /// Daemon configuration (TOML) to start from; the scenario's cage replaces its
     /// calibration.cage_m.
     #[arg(long, value_name = "FILE")]
@@ -205,7 +227,22 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     ];
     if let Some(seed) = args.seed {
         sim_args.extend(["--seed".into(), seed.to_string()]);
+        if args.random_layout {
+            sim_args.push("--random-layout".into());
+        }
     }
+    // The indicated point as the simulator will lay the scene out (the same seeded code).
+    let mut laid_out = scenario.clone();
+    if let Some(seed) = args.seed {
+        if args.random_layout {
+            if !laid_out.randomise_layout(seed) {
+                bail!("{}: the blocks do not fit a random layout (seed {seed})", args.scenario.display());
+            }
+        } else {
+            laid_out.randomise_target(seed);
+        }
+    }
+    let point = laid_out.indicated_point_m();
     let mut sim = spawn("sim", &sim_args, dir)?;
     let deadline = start + Duration::from_secs_f64(args.timeout_s);
     // The hint appears once the simulator has built the scene (before its first frame).
@@ -218,18 +255,21 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let daemon_args = vec![
+    let mut daemon_args = vec![
         "daemon".to_string(),
         "--domain".into(),
         domain.to_string(),
         "--config".into(),
         s(&dir.join("daemon.toml")),
-        "--hint".into(),
-        s(&dir.join("hint.json")),
         "--out".into(),
         s(dir),
         "--json".into(),
     ];
+    if args.hint {
+        daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
+    } else {
+        daemon_args.extend(["--point".into(), format!("{},{},{}", point[0], point[1], point[2])]);
+    }
     let mut daemon = spawn("daemon", &daemon_args, dir)?;
     let mut note = None;
     loop {
@@ -291,6 +331,12 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         json!(r)
     } else if let Some(n) = &note {
         json!(n)
+    } else if v["daemon"]["targeted"]["is_task_target"] == json!(false) {
+        json!(format!(
+            "the daemon went for block '{}', not the target '{}'",
+            v["daemon"]["targeted"]["block"].as_str().unwrap_or("?"),
+            v["target"].as_str().unwrap_or("?")
+        ))
     } else if v["verdict"] == json!("timed_out") {
         json!("the scenario timed out before the target was lifted and held")
     } else if d.is_null() {
@@ -306,6 +352,17 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         "phase_reached": d["phase_reached"],
         "final_phase": d["final_phase"],
         "failure_reason": failure_reason,
+        "target_source": d["target_source"],
+        "target_block": v["target"],
+        "targeted_block": v["daemon"]["targeted"]["block"],
+        "targeted_face": v["daemon"]["targeted"]["face"],
+        "indicated_point_m": point,
+        "plan_facets": d["plan"]["facets"].as_array().map(Vec::len),
+        "plan_candidates": d["plan"]["candidates"].as_array().map(Vec::len),
+        "plan_width_mm": d["plan"]["chosen"]["width_mm"],
+        "planner_ms": d["planning"]["planner_ms"],
+        "planning_frames": d["planning"]["frames"],
+        "gripper_updates_while_planning": d["planning"]["gripper_updates"],
         "servo_steps": d["servo_steps"],
         "final_plane_error_mm": conv["final_plane_error_mm"],
         "final_angle_error_deg": conv["final_angle_error_deg"],
@@ -337,6 +394,20 @@ fn print_summary(s: &Value) {
         s["phase_reached"].as_str().unwrap_or("?"),
         s["failure_reason"].as_str().map(|r| format!(": {r}")).unwrap_or_default()
     );
+    if s["target_source"] == "plan" {
+        println!(
+            "  plan: {} facets, {} grasp candidates, chosen {} mm wide on block '{}' (face {}; the target is '{}'); planner {}, {} frames answered meanwhile, gripper tracked {} times",
+            s["plan_facets"],
+            s["plan_candidates"],
+            num("plan_width_mm", ""),
+            s["targeted_block"].as_str().unwrap_or("?"),
+            s["targeted_face"].as_str().unwrap_or("?"),
+            s["target_block"].as_str().unwrap_or("?"),
+            num("planner_ms", " ms"),
+            s["planning_frames"],
+            s["gripper_updates_while_planning"]
+        );
+    }
     println!(
         "  servo: {} steps; at convergence plate {} off the facet plane, {} off parallel; jaws {} off the block's mid-plane",
         s["servo_steps"],

@@ -63,6 +63,12 @@ pub struct SimArgs {
     /// seed and block poses as written.
     #[arg(long)]
     seed: Option<u64>,
+    /// With --seed: a random layout of all the scenario's blocks instead (positions in
+    /// x 0.27..0.45 m, y -0.15..0.15 m, any yaw, at least 60 mm between their bounding
+    /// circles; kinds, sizes and shades as written). A task with an indicated point gets a
+    /// random target and the point within 15 mm of it. What `handeye batch` runs.
+    #[arg(long, requires = "seed")]
+    random_layout: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
     /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
     /// before the first frame, for `handeye daemon --hint`.
@@ -103,7 +109,13 @@ pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
     let mut scenario = Scenario::load(&args.scenario)?;
     if let Some(seed) = args.seed {
-        scenario.randomise_target(seed);
+        if args.random_layout {
+            if !scenario.randomise_layout(seed) {
+                anyhow::bail!("{}: the blocks do not fit a random layout (seed {seed})", args.scenario.display());
+            }
+        } else {
+            scenario.randomise_target(seed);
+        }
     }
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
@@ -180,6 +192,11 @@ pub fn run(args: SimArgs) -> Result<()> {
             "commands_rejected": transport.command_stats().rejected_total(),
             "success": matches!(verdict, Verdict::Success { .. }),
             "seed": runner.sim.scenario.seed,
+            "target": runner.sim.scenario.blocks[runner.sim.target_index()].name,
+            "indicated_point_m": runner.sim.scenario.indicated_point_m(),
+            "layout": runner.sim.scenario.blocks.iter().map(|b| serde_json::json!({
+                "name": b.name, "kind": b.kind, "size_mm": b.size_mm, "position_m": b.position_m, "yaw_deg": b.yaw_deg,
+            })).collect::<Vec<_>>(),
             "daemon": &runner.watch,
         });
         if let Some(path) = &args.verdict_out {

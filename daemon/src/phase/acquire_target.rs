@@ -1,6 +1,10 @@
-//! Acquire the target from the operator hint: one tracker per view on the hinted facet
-//! polygon, checked against the epipolar constraint (corners that break it mean the two
-//! clicks are not the same facet), left to converge with the arm still, then verified.
+//! Acquire the target: one tracker per view on the target facet's polygon (the operator
+//! hint's, or the planned facet's outline, thesis §6.3.4: "the image locations of the facet
+//! associated with the chosen grasp site were used to initialise a pair of active
+//! contours"), checked against the epipolar constraint (corners that break it are not the
+//! same facet in both views), left to converge with the arm still, then verified. The grasp
+//! site, if planned, is then expressed in each tracker's template coordinates, so that it
+//! follows the facet.
 
 use handeye_vision::tracker::{ContourTracker, Role, View};
 
@@ -23,8 +27,12 @@ impl AcquireTarget {
         }
         if !self.started {
             self.started = true;
-            let Some(hint) = m.hint.as_ref() else {
-                return Step::Fail("acquire_target: no operator hint (start the daemon with --hint FILE)".into());
+            let Some(hint) = m.target.as_ref() else {
+                return Step::Fail("acquire_target: no target (no operator hint and no plan)".into());
+            };
+            let what = match hint.source {
+                super::TargetSource::Hint => "the hint's corners",
+                super::TargetSource::Plan => "the planned facet's corners",
             };
             let Some(cal) = m.calibration.as_ref() else { return Step::Fail("acquire_target: not calibrated".into()) };
             let n = hint.left_px.len();
@@ -38,23 +46,27 @@ impl AcquireTarget {
                 .sqrt();
             if rms > m.cfg.target.max_epipolar_px {
                 return Step::Fail(format!(
-                    "acquire_target: the hint's corners break the epipolar constraint ({rms:.1} px RMS > {} px): not the same facet in both views?",
+                    "acquire_target: {what} break the epipolar constraint ({rms:.1} px RMS > {} px): not the same facet in both views?",
                     m.cfg.target.max_epipolar_px
                 ));
             }
-            let max_depth = m.cfg.gripper.max_opening_m * 1e3;
-            if hint.depth_mm >= max_depth {
-                return Step::Fail(format!("acquire_target: the target is {:.0} mm deep, wider than the jaws open ({max_depth:.0} mm)", hint.depth_mm));
+            let max_depth = m.cfg.gripper.max_opening_m;
+            if hint.depth_m >= max_depth {
+                return Step::Fail(format!(
+                    "acquire_target: the target is {:.0} mm deep, wider than the jaws open ({:.0} mm)",
+                    hint.depth_m * 1e3,
+                    max_depth * 1e3
+                ));
             }
             for (view, poly) in [(View::Left, &hint.left_px), (View::Right, &hint.right_px)] {
                 match ContourTracker::new(m.cfg.tracker.target_tracker_config(), poly) {
                     Ok(t) => {
                         m.trackers.insert(Role::Target, view, t);
                     }
-                    Err(e) => return Step::Fail(format!("acquire_target: hint polygon ({view:?}): {e}")),
+                    Err(e) => return Step::Fail(format!("acquire_target: target polygon ({view:?}): {e}")),
                 }
             }
-            m.set_status("acquire target: trackers on the hinted facet converging");
+            m.set_status("acquire target: trackers on the target facet converging");
             return Step::Stay(Cmd::HOLD);
         }
         self.frames += 1;
@@ -77,6 +89,19 @@ impl AcquireTarget {
             let score = t.confidence().score;
             if score < m.cfg.target.min_score {
                 return Step::Fail(format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {}", m.cfg.target.min_score));
+            }
+        }
+        // The planned site, in each tracker's template coordinates.
+        if let Some(site_px) = m.target.as_ref().and_then(|t| t.site_px) {
+            let mut st = [[0.0; 2]; 2];
+            for (k, view) in View::ALL.into_iter().enumerate() {
+                let Some(p) = m.trackers.get(Role::Target, view).and_then(|t| t.template_from_image(nalgebra::Vector2::new(site_px[k][0], site_px[k][1]))) else {
+                    return Step::Fail("acquire_target: the grasp site has no place in the target tracker's frame".into());
+                };
+                st[k] = [p.x, p.y];
+            }
+            if let Some(t) = m.target.as_mut() {
+                t.site_template = Some(st);
             }
         }
         m.snapshot = Some("target_acquired");

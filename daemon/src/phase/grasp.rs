@@ -53,9 +53,13 @@ impl Grasp {
                         self.stage = GraspStage::Down { wait: Some(MoveWait::new(c.seq, c.frame_index)) };
                         m.set_status("grasp: descending");
                         m.snapshot = Some("over_target");
-                        // Down to the grasp height above the table by the robot's own
-                        // kinematics (exact, unlike an image-derived height).
-                        let dz = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m - f64::from(c.robot.tool_pos_m[2]);
+                        // Down to the grasp height by the robot's own kinematics: the
+                        // configured height above the table, or the planned one (the
+                        // fingers' tips at the low-water mark the plan's collision test
+                        // cleared) when it is higher.
+                        let floor = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m;
+                        let z = m.target.as_ref().and_then(|t| t.grasp_tool_z_m).map_or(floor, |z| z.max(floor));
+                        let dz = z - f64::from(c.robot.tool_pos_m[2]);
                         Step::Stay(Cmd::move_by([0.0, 0.0, dz], 0.0, speed))
                     }
                 }

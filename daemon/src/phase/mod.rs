@@ -1,5 +1,5 @@
-//! The daemon's phases (METHOD.md §1, §3): acquire gripper → calibrate → acquire target →
-//! servo → grasp → lift → done, each with a time-out and a failure reason; `failed` and
+//! The daemon's phases (METHOD.md §1, §3, §6): acquire gripper → calibrate → plan (unless
+//! an operator hint names the target) → acquire target → servo → grasp → lift → done, each with a time-out and a failure reason; `failed` and
 //! `stopped` end a run. One file per phase; this module holds what they share: the
 //! [`Mission`] (state that lives across phases), the command a phase asks for ([`Cmd`]),
 //! and waiting for a commanded move to finish ([`MoveWait`]).
@@ -13,6 +13,7 @@ pub mod acquire_gripper;
 pub mod acquire_target;
 pub mod calibrate;
 pub mod grasp;
+pub mod plan;
 pub mod servo;
 
 use handeye_vision::affine::{AffineStereo, EpipolarConstraint};
@@ -112,6 +113,8 @@ pub enum Job {
     LocateGripper { open: [handeye_vision::image::ImageBuf; 2], closed: [handeye_vision::image::ImageBuf; 2] },
     /// Fit the affine stereo model and the epipolar constraint to the cage.
     Calibrate { robot_m: Vec<nalgebra::Vector3<f64>>, image_px: Vec<[f64; 4]> },
+    /// Plan a grasp on one stereo pair.
+    Plan(Box<crate::planning::PlanRequest>),
 }
 
 /// Results from the worker.
@@ -119,6 +122,7 @@ pub enum Job {
 pub enum JobResult {
     Plate(Result<[[[f64; 2]; 4]; 2], String>),
     Calibration(Result<(AffineStereo, EpipolarConstraint, f64), String>),
+    Plan(Box<crate::planning::PlanOutput>),
 }
 
 /// Frames after submission at which a worker result is taken (it waits if it is early).
@@ -132,6 +136,7 @@ pub fn run_job(job: Job) -> JobResult {
     match job {
         Job::LocateGripper { open, closed } => JobResult::Plate(acquire_gripper::locate_plates(&open, &closed)),
         Job::Calibrate { robot_m, image_px } => JobResult::Calibration(calibrate::fit(&robot_m, &image_px)),
+        Job::Plan(request) => JobResult::Plan(Box::new(crate::planning::plan(*request))),
     }
 }
 
@@ -147,12 +152,76 @@ pub struct ServoTraceRow {
     pub offset_yaw_rad: f64,
 }
 
+/// Where the target came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetSource {
+    /// The operator clicked the facet in both views (`hint.json`).
+    Hint,
+    /// The grasp planner chose it.
+    Plan,
+}
+
+/// The target facet and how to grasp it: from the operator hint or from the plan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetSpec {
+    pub source: TargetSource,
+    /// The facet's outline in both views, tracker pixels, vertex for vertex.
+    pub left_px: Vec<[f64; 2]>,
+    pub right_px: Vec<[f64; 2]>,
+    /// Extent of the object behind the facet along its normal: the grasp width, m.
+    pub depth_m: f64,
+    /// The grasp site in both views when the target was chosen, tracker pixels (`None`:
+    /// the facet's centre).
+    pub site_px: Option<[[f64; 2]; 2]>,
+    /// The site in each target tracker's template coordinates, set once they are on the
+    /// facet: the site then moves with the tracked facet.
+    pub site_template: Option<[[f64; 2]; 2]>,
+    /// Tool height at the grasp, robot frame, m (`None`: `servo.grasp_height_m` above the
+    /// table).
+    pub grasp_tool_z_m: Option<f64>,
+}
+
+impl TargetSpec {
+    pub fn from_hint(h: &OperatorHint) -> Self {
+        Self {
+            source: TargetSource::Hint,
+            left_px: h.left_px.clone(),
+            right_px: h.right_px.clone(),
+            depth_m: h.depth_mm * 1e-3,
+            site_px: None,
+            site_template: None,
+            grasp_tool_z_m: None,
+        }
+    }
+}
+
+/// How the loop fared while the planner worked.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlanningStats {
+    /// Frames answered between handing the pair over and taking the result.
+    pub frames: u64,
+    /// Gripper tracker updates (left, right) meanwhile: one per frame when it kept tracking.
+    pub gripper_updates: [u64; 2],
+    pub planner_ms: f64,
+    pub total_ms: f64,
+}
+
 /// State shared across phases.
 pub struct Mission {
     pub cfg: DaemonConfig,
     pub tracker_config: TrackerConfig,
     pub plate: PlateTemplate,
     pub hint: Option<OperatorHint>,
+    /// What to grasp: set from the hint at start-up, or by the plan phase.
+    pub target: Option<TargetSpec>,
+    /// The operator's indicated point on the working plane, robot frame, m.
+    pub indicated_m: Option<[f64; 3]>,
+    /// What the planner found (`None` before the plan phase, or with a hint).
+    pub plan: Option<crate::planning::PlanSummary>,
+    /// The plan with its images, for the report (taken by whoever writes it).
+    pub plan_report: Option<Box<crate::planning::PlanOutput>>,
+    pub planning: Option<PlanningStats>,
     pub trackers: StereoTrackerSet,
     pub worker: Worker<Job, JobResult>,
     pub calibration: Option<Calibration>,
@@ -181,7 +250,12 @@ impl Mission {
             cfg,
             tracker_config,
             plate,
+            target: hint.as_ref().map(TargetSpec::from_hint),
             hint,
+            indicated_m: None,
+            plan: None,
+            plan_report: None,
+            planning: None,
             trackers: StereoTrackerSet::new(),
             worker: Worker::spawn("handeye-worker", 2, run_job)?,
             calibration: None,
@@ -266,7 +340,7 @@ pub fn reject_text(code: u32) -> &'static str {
 /// Which phases need which trackers tracking (a lost one stops the arm).
 pub fn needs_trackers(phase: Phase) -> (bool, bool) {
     match phase {
-        Phase::Calibrate => (true, false),
+        Phase::Calibrate | Phase::Plan => (true, false),
         Phase::AcquireTarget | Phase::Servo => (true, true),
         _ => (false, false),
     }
@@ -276,6 +350,7 @@ pub fn needs_trackers(phase: Phase) -> (bool, bool) {
 pub enum PhaseState {
     AcquireGripper(acquire_gripper::AcquireGripper),
     Calibrate(calibrate::Calibrate),
+    Plan(plan::PlanPhase),
     AcquireTarget(acquire_target::AcquireTarget),
     Servo(Box<servo::ServoPhase>),
     Grasp(grasp::Grasp),
@@ -290,6 +365,7 @@ impl PhaseState {
         match self {
             Self::AcquireGripper(_) => Phase::AcquireGripper,
             Self::Calibrate(_) => Phase::Calibrate,
+            Self::Plan(_) => Phase::Plan,
             Self::AcquireTarget(_) => Phase::AcquireTarget,
             Self::Servo(_) => Phase::Servo,
             Self::Grasp(_) => Phase::Grasp,
@@ -309,6 +385,7 @@ impl PhaseState {
         let step = match self {
             Self::AcquireGripper(p) => p.step(m, c),
             Self::Calibrate(p) => p.step(m, c),
+            Self::Plan(p) => p.step(m, c),
             Self::AcquireTarget(p) => p.step(m, c),
             Self::Servo(p) => p.step(m, c),
             Self::Grasp(p) => p.step(m, c),
@@ -318,7 +395,10 @@ impl PhaseState {
         if let Step::Next(_) = step {
             *self = match self {
                 Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.frame_index)),
-                Self::Calibrate(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
+                // With a target from the operator hint there is nothing to plan.
+                Self::Calibrate(_) if m.target.is_some() => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
+                Self::Calibrate(_) => Self::Plan(plan::PlanPhase::new(c.frame_index)),
+                Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),
                     Err(reason) => return Step::Fail(reason),

@@ -73,7 +73,7 @@ fn wrap(a: f64) -> f64 {
 }
 
 /// `tool − reference` in the robot frame at yaw `yaw_rad`.
-fn tool_from_reference(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
+pub fn tool_from_reference(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
     let n0 = m.cfg.gripper.normal_at_zero_yaw;
     let (s, c) = yaw_rad.sin_cos();
     let n = Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).normalize();
@@ -117,8 +117,8 @@ impl ServoPhase {
     /// Plans the goal and the coarse approach from the current views (called once, on entry).
     pub fn new(m: &mut Mission, c: &Cycle<'_>) -> Result<Self, String> {
         let cal = m.calibration.clone().ok_or("servo: not calibrated")?;
-        let hint = m.hint.as_ref().ok_or("servo: no operator hint")?;
-        let depth_m = hint.depth_mm * 1e-3;
+        let target_spec = m.target.clone().ok_or("servo: no target")?;
+        let depth_m = target_spec.depth_m.max(0.0);
         let s = m.cfg.servo.clone();
         let config = ServoConfig {
             gain: s.gain,
@@ -160,6 +160,20 @@ impl ServoPhase {
         let yaw_now = f64::from(c.robot.tool_yaw_rad);
         let cal_lever = tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw_now));
         let facet_centre = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
+        // A planned grasp site (thesis §6.3.4: "expressed in a coordinate system based on the
+        // target facet"): where the target trackers now put it, reconstructed; the servo's
+        // goal moves along the facet by its horizontal offset from the facet's centre.
+        let along_m = match target_spec.site_template {
+            Some(st) => {
+                let at = |view, k: usize| {
+                    m.trackers.get(Role::Target, view).map(|t| t.image_from_template(nalgebra::Vector2::new(st[k][0], st[k][1])))
+                };
+                let (Some(l), Some(r)) = (at(View::Left, 0), at(View::Right, 1)) else { return Err("servo: no target trackers".into()) };
+                let site = model.reconstruct(&StereoPoint { left: [l.x, l.y], right: [r.x, r.y] }) - cal_lever;
+                a.dot(&(site - facet_centre))
+            }
+            None => 0.0,
+        };
         // Thesis §6.3.4: make the plate coplanar with the facet (zero parallax: insensitive to
         // the model's scale), the tool above the facet's centre at the stand-off height with
         // the jaws behind the facet plane; the grasp then moves by metric offsets that the
@@ -167,7 +181,7 @@ impl ServoPhase {
         let tool_z = m.cfg.grasp.table_z_m + s.grasp_height_m + s.standoff_above_m;
         let t = m.cfg.gripper.tool_from_reference_m;
         // Reference point relative to the facet centre: in the facet plane, straight above.
-        let offset_m = up * (tool_z - facet_centre.z - t[1]) - a * t[0];
+        let offset_m = up * (tool_z - facet_centre.z - t[1]) + a * (along_m - t[0]);
         let tool_rel = offset_m + a * t[0] + up * t[1] + n * t[2];
         let goal = goal_for(model, &cal.model.m, m, &offset_m, &a)?;
         let tool_goal = facet_centre + tool_rel;
@@ -177,7 +191,7 @@ impl ServoPhase {
         m.servo_steps = 0;
         m.snapshot = Some("servo_start");
         m.set_status("servo: coarse approach from the reconstruction");
-        tracing::info!(?offset_m, ?tool_goal, yaw_goal, "servo plan");
+        tracing::info!(?offset_m, along_m, ?tool_goal, yaw_goal, "servo plan");
         Ok(Self {
             start_frame: c.frame_index,
             stage: Stage::Approach,

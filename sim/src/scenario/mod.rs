@@ -365,6 +365,84 @@ impl Scenario {
         b.yaw_deg += u() * Self::RANDOM_TURN_DEG;
     }
 
+    /// Where [`Self::randomise_layout`] puts blocks: x and y ranges of their centres, metres
+    /// (the calibration cage's footprint widened in y: in view of both cameras and in reach
+    /// with the gripper's plate facing the cameras).
+    pub const LAYOUT_X_M: [f64; 2] = [0.27, 0.45];
+    pub const LAYOUT_Y_M: [f64; 2] = [-0.15, 0.15];
+    /// Smallest gap between two blocks' bounding circles, metres: room for a finger of the
+    /// fully opened jaws (40 mm from the grasp centre, 12 mm thick) beside a block.
+    pub const LAYOUT_GAP_M: f64 = 0.06;
+    /// Largest distance of the indicated point from the target block's centre, metres.
+    pub const LAYOUT_POINT_OFFSET_M: f64 = 0.015;
+
+    /// A seeded random layout of the scenario's blocks (batch runs): uses `seed` for every
+    /// random choice, then places every block (kind, size and shades as written) at a random
+    /// position in [`Self::LAYOUT_X_M`] x [`Self::LAYOUT_Y_M`] with a random yaw (any
+    /// angle), at least [`Self::LAYOUT_GAP_M`] between any two blocks' bounding circles.
+    /// The task stays meaningful: with a named target, that block; with an indicated point,
+    /// a random block becomes the target and the point is put within
+    /// [`Self::LAYOUT_POINT_OFFSET_M`] of its centre (so it is the nearest block by far).
+    /// Returns `false` (layout unchanged but for the seed) when the blocks do not fit.
+    pub fn randomise_layout(&mut self, seed: u64) -> bool {
+        self.seed = seed;
+        let mut rng = crate::rng::SplitMix64::new(crate::rng::mix64(seed ^ 0x4c41_594f_5554));
+        let radius = |b: &BlockConfig| 0.5e-3 * b.size_mm[0].hypot(b.size_mm[1]);
+        // Up to 200 attempts at the whole layout, each placing the blocks in turn.
+        for _ in 0..200 {
+            let mut placed: Vec<([f64; 2], f64)> = Vec::with_capacity(self.blocks.len());
+            for b in &self.blocks {
+                let r = radius(b);
+                let mut ok = None;
+                for _ in 0..200 {
+                    let p = [
+                        Self::LAYOUT_X_M[0] + rng.next_f64() * (Self::LAYOUT_X_M[1] - Self::LAYOUT_X_M[0]),
+                        Self::LAYOUT_Y_M[0] + rng.next_f64() * (Self::LAYOUT_Y_M[1] - Self::LAYOUT_Y_M[0]),
+                    ];
+                    if placed.iter().all(|(q, rq)| (p[0] - q[0]).hypot(p[1] - q[1]) >= r + rq + Self::LAYOUT_GAP_M) {
+                        ok = Some(p);
+                        break;
+                    }
+                }
+                match ok {
+                    Some(p) => placed.push((p, r)),
+                    None => break,
+                }
+            }
+            if placed.len() < self.blocks.len() {
+                continue;
+            }
+            for (b, (p, _)) in self.blocks.iter_mut().zip(&placed) {
+                b.position_m = *p;
+                b.yaw_deg = rng.next_f64() * 360.0 - 180.0;
+            }
+            if self.task.point_m.is_some() {
+                let t = ((rng.next_f64() * self.blocks.len() as f64) as usize).min(self.blocks.len() - 1);
+                let (angle, dist) = (rng.next_f64() * std::f64::consts::TAU, rng.next_f64() * Self::LAYOUT_POINT_OFFSET_M);
+                let c = self.blocks[t].position_m;
+                self.task.point_m = Some([c[0] + dist * angle.cos(), c[1] + dist * angle.sin()]);
+            }
+            return true;
+        }
+        false
+    }
+
+    /// The operator's indicated point on the working plane (robot frame, metres): the task's
+    /// `point_m`, or, with a named target, that block's centre (where an operator would
+    /// point). Its height is the working plane's, the lowest cage point's (thesis §6.3.1:
+    /// the lower cage points define the plane the operator points at).
+    pub fn indicated_point_m(&self) -> [f64; 3] {
+        let z = self.cage.points_m.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min);
+        let z = if z.is_finite() { z } else { 0.0 };
+        match self.task.point_m {
+            Some(p) => [p[0], p[1], z],
+            None => {
+                let b = &self.blocks[self.target_index()];
+                [b.position_m[0], b.position_m[1], z]
+            }
+        }
+    }
+
     /// Index of the target block: the named one, or the one nearest the indicated point.
     pub fn target_index(&self) -> usize {
         if let Some(name) = &self.task.target {
@@ -398,6 +476,44 @@ mod tests {
         assert_eq!(s.cameras.len(), 2);
         assert_eq!(s.substeps_per_frame(), 8);
         assert_eq!(s.blocks[s.target_index()].name, "cube");
+    }
+
+    #[test]
+    fn random_layouts_keep_blocks_apart_in_the_region_and_the_point_on_one() {
+        let clutter = parse(include_str!("../../../scenarios/clutter3.toml")).unwrap();
+        let mut targets = std::collections::BTreeSet::new();
+        for seed in 1..=40 {
+            let mut s = clutter.clone();
+            assert!(s.randomise_layout(seed), "seed {seed}");
+            assert_eq!(s.seed, seed);
+            for (i, a) in s.blocks.iter().enumerate() {
+                assert_eq!((a.kind, a.size_mm), (clutter.blocks[i].kind, clutter.blocks[i].size_mm), "blocks keep their kind and size");
+                assert!((Scenario::LAYOUT_X_M[0]..=Scenario::LAYOUT_X_M[1]).contains(&a.position_m[0]));
+                assert!((Scenario::LAYOUT_Y_M[0]..=Scenario::LAYOUT_Y_M[1]).contains(&a.position_m[1]));
+                for b in &s.blocks[i + 1..] {
+                    let d = (a.position_m[0] - b.position_m[0]).hypot(a.position_m[1] - b.position_m[1]);
+                    let r = |x: &BlockConfig| 0.5e-3 * x.size_mm[0].hypot(x.size_mm[1]);
+                    assert!(d >= r(a) + r(b) + Scenario::LAYOUT_GAP_M - 1e-12, "seed {seed}: {} and {} {d:.3} m apart", a.name, b.name);
+                }
+            }
+            // The indicated point is within 15 mm of the target, which is the nearest block.
+            let t = &s.blocks[s.target_index()];
+            let p = s.task.point_m.unwrap();
+            assert!((t.position_m[0] - p[0]).hypot(t.position_m[1] - p[1]) <= Scenario::LAYOUT_POINT_OFFSET_M + 1e-12);
+            targets.insert(t.name.clone());
+            // Seeded: the same seed, the same layout.
+            let mut again = clutter.clone();
+            again.randomise_layout(seed);
+            assert_eq!(format!("{:?}", again.blocks), format!("{:?}", s.blocks));
+        }
+        assert_eq!(targets.len(), 3, "every block is the target for some seed: {targets:?}");
+        // A named target stays the target.
+        let mut cube = parse(PICK_CUBE).unwrap();
+        assert!(cube.randomise_layout(9));
+        assert_eq!(cube.blocks[cube.target_index()].name, "cube");
+        let p = cube.indicated_point_m();
+        assert_eq!([p[0], p[1]], cube.blocks[0].position_m);
+        assert_eq!(p[2], 0.06, "the working plane: the lower cage points");
     }
 
     #[test]

@@ -1,0 +1,240 @@
+//! Plan (thesis ch. 5-6, DESIGN "Daemon phases"): with the arm parked clear of the blocks
+//! but in view, one stereo pair goes to the planner on the worker thread
+//! ([`crate::planning`]), the gripper's image region masked out; the hard loop meanwhile
+//! keeps tracking the gripper at frame rate and answering every frame (the thesis's robot
+//! was blind while it planned). The grasp site nearest the indicated point is chosen; its
+//! facet's outline becomes the target for `acquire_target`, and its width, site and height
+//! go to the servo and the grasp.
+//!
+//! The result is taken no earlier than [`super::WORKER_DELAY_FRAMES`] after the pair was
+//! handed over (a fixed pipeline delay keeps lockstep runs repeatable whatever the
+//! worker's speed); if it is late the loop keeps waiting, tracking and answering.
+
+use handeye_vision::grasp::{GraspConfig, GripperModel};
+use handeye_vision::planner::PlannerConfig;
+use handeye_vision::tracker::{Role, View};
+use handeye_wire::robot_flags;
+use nalgebra::Vector3;
+
+use super::{reject_text, timed_out, Cmd, Cycle, Job, JobResult, Mission, MovePoll, MoveWait, PlanningStats, Step, TargetSource, TargetSpec};
+use crate::planning::{PlanRequest, PlannedTarget};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    /// Going to the park pose (if not there).
+    Park { wait: Option<MoveWait> },
+    /// Arm still for this many frames.
+    Settle { still: u32 },
+    /// The pair is with the planner since this frame.
+    Planning { submitted: u64 },
+}
+
+pub struct PlanPhase {
+    start_frame: u64,
+    stage: Stage,
+    /// Gripper tracker update counts when the pair was handed over.
+    updates_at_submit: [u64; 2],
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise in image axes.
+pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = points.iter().copied().filter(|q| q[0].is_finite() && q[1].is_finite()).collect();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let pts: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 { Box::new(p.iter()) } else { Box::new(p.iter().rev()) };
+        for &q in pts {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// The gripper's image region in each view (tracker pixels): the plate trackers' corners and
+/// the configured box around the reference point, projected with the calibrated model
+/// from the tracked reference point (only directions go through the model).
+fn gripper_masks(m: &Mission, yaw_rad: f64) -> Option<[Vec<[f64; 2]>; 2]> {
+    let cal = m.calibration.as_ref()?;
+    let n0 = m.cfg.gripper.normal_at_zero_yaw;
+    let (s, c) = yaw_rad.sin_cos();
+    let n = Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).try_normalize(1e-12)?;
+    let up = Vector3::z();
+    let a = up.cross(&n);
+    let b = &m.cfg.plan.mask_box_m;
+    let mut masks: [Vec<[f64; 2]>; 2] = [Vec::new(), Vec::new()];
+    for (k, view) in View::ALL.into_iter().enumerate() {
+        let t = m.trackers.get(Role::Gripper, view)?;
+        let reference = t.image_from_template(nalgebra::Vector2::new(m.plate.reference_st[0], m.plate.reference_st[1]));
+        let mut pts: Vec<[f64; 2]> = t.corners().map(|p| [p.x, p.y]).collect();
+        for ia in 0..2 {
+            for ib in 0..2 {
+                for i_n in 0..2 {
+                    let d = a * b[0][ia] + up * b[1][ib] + n * b[2][i_n];
+                    let w = cal.model.m * d;
+                    let (du, dv) = if k == 0 { (w[0], w[1]) } else { (w[2], w[3]) };
+                    pts.push([reference.x + du, reference.y + dv]);
+                }
+            }
+        }
+        masks[k] = convex_hull(&pts);
+    }
+    Some(masks)
+}
+
+impl PlanPhase {
+    pub fn new(frame_index: u64) -> Self {
+        Self { start_frame: frame_index, stage: Stage::Park { wait: None }, updates_at_submit: [0; 2] }
+    }
+
+    fn gripper_updates(m: &Mission) -> [u64; 2] {
+        View::ALL.map(|v| m.trackers.get(Role::Gripper, v).map_or(0, |t| t.update_count()))
+    }
+
+    pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
+        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.plan.timeout_s) {
+            return Step::Fail(format!("plan: timed out after {} s at {:?}", m.cfg.plan.timeout_s, self.stage));
+        }
+        match &mut self.stage {
+            Stage::Park { wait } => {
+                let Some(w) = wait else {
+                    let park = m.cfg.plan.park_m.clone();
+                    if park.len() != 3 {
+                        // Where the calibration parked it.
+                        self.stage = Stage::Settle { still: 0 };
+                        return Step::Stay(Cmd::HOLD);
+                    }
+                    *wait = Some(MoveWait::new(c.seq, c.frame_index));
+                    m.set_status("plan: parking clear of the blocks");
+                    return Step::Stay(Cmd::move_to([park[0], park[1], park[2]], f64::from(c.robot.tool_yaw_rad), m.cfg.calibration.speed_mps));
+                };
+                match w.poll(c, 1) {
+                    MovePoll::Pending => Step::Stay(Cmd::HOLD),
+                    MovePoll::Rejected(code) => Step::Fail(format!("plan: the robot refused the park pose: {}", reject_text(code))),
+                    MovePoll::Done => {
+                        self.stage = Stage::Settle { still: 0 };
+                        Step::Stay(Cmd::HOLD)
+                    }
+                }
+            }
+            Stage::Settle { still } => {
+                let moving = c.robot.flags & robot_flags::MOVING != 0;
+                *still = if moving { 0 } else { *still + 1 };
+                if *still <= m.cfg.plan.settle_frames {
+                    m.set_status("plan: arm parked, settling");
+                    return Step::Stay(Cmd::HOLD);
+                }
+                let Some(cal) = m.calibration.as_ref() else { return Step::Fail("plan: not calibrated".into()) };
+                let yaw = f64::from(c.robot.tool_yaw_rad);
+                let Some(masks) = gripper_masks(m, yaw) else { return Step::Fail("plan: no gripper trackers to mask the gripper with".into()) };
+                let lever = super::servo::tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw));
+                let p = &m.cfg.plan;
+                let mut planner = PlannerConfig::default();
+                planner.matching.epipolar_tol_px = p.epipolar_tol_px;
+                let grasp = GraspConfig {
+                    gripper: GripperModel {
+                        finger_thickness_m: p.finger_thickness_m,
+                        finger_breadth_m: p.finger_breadth_m,
+                        jaw_opening_m: Some(m.cfg.gripper.max_opening_m.max(p.max_width_m)),
+                        max_width_m: p.max_width_m,
+                        ..GripperModel::default()
+                    },
+                    ..GraspConfig::default()
+                };
+                // Allocates once: the pair the planner works on.
+                let request = PlanRequest {
+                    images: [c.left.to_owned(), c.right.to_owned()],
+                    model: cal.model.clone(),
+                    lever_m: [lever.x, lever.y, lever.z],
+                    masks,
+                    mask_margin_px: p.mask_margin_px,
+                    indicated_m: m.indicated_m,
+                    max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
+                    planner,
+                    grasp,
+                    disparity_margin: p.disparity_margin,
+                    disparity_margin_px: p.disparity_margin_px,
+                };
+                match m.worker.try_submit(Job::Plan(Box::new(request))) {
+                    Ok(()) => {
+                        self.updates_at_submit = Self::gripper_updates(m);
+                        self.stage = Stage::Planning { submitted: c.frame_index };
+                        m.set_status("plan: planning; gripper tracked meanwhile");
+                        m.snapshot = Some("planning");
+                    }
+                    Err(_) => m.set_status("plan: worker busy, waiting"),
+                }
+                Step::Stay(Cmd::HOLD)
+            }
+            Stage::Planning { submitted } => {
+                let submitted = *submitted;
+                if c.frame_index < submitted + super::WORKER_DELAY_FRAMES {
+                    return Step::Stay(Cmd::HOLD);
+                }
+                let out = match m.worker.try_result() {
+                    None => return Step::Stay(Cmd::HOLD),
+                    Some(JobResult::Plan(out)) => out,
+                    Some(_) => return Step::Fail("plan: unexpected worker result".into()),
+                };
+                let now = Self::gripper_updates(m);
+                m.planning = Some(PlanningStats {
+                    frames: c.frame_index - submitted,
+                    gripper_updates: [now[0] - self.updates_at_submit[0], now[1] - self.updates_at_submit[1]],
+                    planner_ms: out.summary.planner_ms,
+                    total_ms: out.summary.total_ms,
+                });
+                let summary = out.summary.clone();
+                let target = out.target.clone();
+                m.plan = Some(summary.clone());
+                m.plan_report = Some(out);
+                let Some(t) = target else {
+                    let reasons: Vec<String> = summary.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
+                    return Step::Fail(format!(
+                        "plan: no grasp site ({} facets; rejected: {})",
+                        summary.facets.len(),
+                        if reasons.is_empty() { "none found".into() } else { reasons.join(", ") }
+                    ));
+                };
+                m.target = Some(target_spec(&t, m));
+                m.set_status("plan: grasp chosen");
+                Step::Next(Cmd::HOLD)
+            }
+        }
+    }
+}
+
+fn target_spec(t: &PlannedTarget, m: &Mission) -> TargetSpec {
+    let floor = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m;
+    TargetSpec {
+        source: TargetSource::Plan,
+        left_px: t.left_px.clone(),
+        right_px: t.right_px.clone(),
+        depth_m: t.width_m,
+        site_px: Some(t.site_px),
+        site_template: None,
+        grasp_tool_z_m: Some(t.tool_m[2].max(floor)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hull_of_a_square_with_inner_points() {
+        let h = convex_hull(&[[0.0, 0.0], [2.0, 0.0], [1.0, 1.0], [2.0, 2.0], [0.0, 2.0], [1.0, 0.5]]);
+        assert_eq!(h.len(), 4, "{h:?}");
+        for corner in [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]] {
+            assert!(h.contains(&corner));
+        }
+    }
+}

@@ -1,0 +1,468 @@
+//! The plan phase's work on the worker thread (thesis ch. 5-6): mask the gripper out of one
+//! stereo pair, find facets with the planner, turn them into a grasp scene in robot
+//! coordinates through the calibrated affine model, plan grasps, and pick the one nearest
+//! the indicated point. Pure (no I/O); [`crate::phase::plan`] runs it and takes the result.
+//!
+//! **Coordinates.** The calibration maps *tool* positions to the images of the plate's
+//! reference point: `w = M X_tool + c`. A scene point `P` seen at `w` is where the reference
+//! point would be with the tool at `P + L`, `L = tool − reference` at the calibration's yaw,
+//! so `w = M P + (c + M L)`: the planner gets that model (and +0.5 px: its pixel `(i, j)`
+//! covers `[i, i+1)`, the trackers' has its centre at `(i, j)`), and its facets come out in
+//! robot coordinates.
+//!
+//! **Masking.** The gripper (plate, palm and open fingers) is in view while the planner
+//! looks: its pixels are replaced by a smooth fill (each masked pixel the inverse-distance
+//! mean of the nearest unmasked pixels left, right, above and below), which leaves no step
+//! at the mask's border, so no edges come from the gripper or the mask. The rest of the arm
+//! is above the parked tool point; features that high are dropped from the grasp scene.
+//!
+//! **Target polygons.** The chosen facet's outline initialises the target trackers: its
+//! image polygons, simplified (Douglas-Peucker, 1.5 px on the cyclopean polygon, the same
+//! vertices kept in both views) so that a corner the planner split into slivers does not
+//! become a tracker side of two pixels.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use handeye_vision::affine::AffineStereo;
+use handeye_vision::grasp::{plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
+use handeye_vision::image::ImageBuf;
+use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
+use nalgebra::{Vector3, Vector4};
+use serde::Serialize;
+
+/// Planner pixel coordinates minus tracker pixel coordinates.
+pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
+
+/// Everything the worker needs for one plan.
+pub struct PlanRequest {
+    /// The stereo pair, as taken with the arm parked (left, right).
+    pub images: [ImageBuf; 2],
+    /// The calibration: tool positions to the reference point's images (tracker pixels).
+    pub model: AffineStereo,
+    /// `tool − reference` at the calibration's yaw, robot frame, m.
+    pub lever_m: [f64; 3],
+    /// The gripper's image region in each view (tracker pixels), masked before planning.
+    pub masks: [Vec<[f64; 2]>; 2],
+    pub mask_margin_px: f64,
+    /// The operator's indicated point, robot frame, m.
+    pub indicated_m: Option<[f64; 3]>,
+    /// Features entirely above this height are the arm, m.
+    pub max_height_m: f64,
+    pub planner: PlannerConfig,
+    pub grasp: GraspConfig,
+    pub disparity_margin: f64,
+    pub disparity_margin_px: f64,
+}
+
+/// The grasp to execute, in the terms the later phases need.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedTarget {
+    /// The facet's outline for the target trackers, tracker pixels, vertex for vertex.
+    pub left_px: Vec<[f64; 2]>,
+    pub right_px: Vec<[f64; 2]>,
+    /// Grasp width (between the front and the hypothesised rear surface), m, >= 0.
+    pub width_m: f64,
+    /// The grasp site (on the facet's top edge) in both views, tracker pixels.
+    pub site_px: [[f64; 2]; 2],
+    pub site_m: [f64; 3],
+    /// Tool point at the grasp: between the fingers at the low-water mark, m.
+    pub tool_m: [f64; 3],
+}
+
+/// One planner facet, as the report shows it.
+#[derive(Debug, Clone, Serialize)]
+pub struct FacetSummary {
+    pub plan_facet: usize,
+    /// Outline in both views, tracker pixels.
+    pub left_px: Vec<[f64; 2]>,
+    pub right_px: Vec<[f64; 2]>,
+    /// Corners in robot coordinates, m.
+    pub corners_m: Option<Vec<[f64; 3]>>,
+    /// Object id in the grasp scene (`None`: left out of it).
+    pub component: Option<usize>,
+}
+
+/// A grasp site, as the report shows it.
+#[derive(Debug, Clone, Serialize)]
+pub struct SiteSummary {
+    pub plan_facet: usize,
+    pub width_mm: f64,
+    pub site_m: [f64; 3],
+    pub centre_m: [f64; 3],
+    pub tool_m: Option<[f64; 3]>,
+    pub yaw_deg: Option<f64>,
+    pub site_left_px: [f64; 2],
+    pub site_right_px: [f64; 2],
+    /// Plan-view distance of the grasp centre from the indicated point, mm.
+    pub distance_mm: Option<f64>,
+    /// Why it was rejected (`None` for a candidate).
+    pub reason: Option<String>,
+}
+
+/// What the planner found and decided (`plan.json`, and the outcome's `plan`).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct PlanSummary {
+    pub segments: [usize; 2],
+    pub matches: usize,
+    pub planes: usize,
+    pub facets: Vec<FacetSummary>,
+    /// The highest collision-free site of each facet that has one, preferred first.
+    pub candidates: Vec<SiteSummary>,
+    pub chosen: Option<SiteSummary>,
+    /// Sites that failed a rule (with their place), and facets or edges that failed before a
+    /// site existed (counted in `rejected_by_reason` only).
+    pub rejected_sites: Vec<SiteSummary>,
+    pub rejected_by_reason: BTreeMap<String, usize>,
+    pub indicated_m: Option<[f64; 3]>,
+    /// The indicated point in both views, tracker pixels.
+    pub indicated_px: Option<[[f64; 2]; 2]>,
+    /// The gripper's masked region in both views, tracker pixels.
+    pub masks_px: [Vec<[f64; 2]>; 2],
+    pub masked_px: [usize; 2],
+    /// Epipolar bootstrap: RMS before and after, px.
+    pub bootstrap_rms_px: Option<[f64; 2]>,
+    pub planner_ms: f64,
+    pub total_ms: f64,
+}
+
+/// The worker's answer.
+#[derive(Debug)]
+pub struct PlanOutput {
+    pub summary: PlanSummary,
+    /// `None` when no site survived the rules.
+    pub target: Option<PlannedTarget>,
+    /// The images as the planner saw them (masked), for the report.
+    pub images: [ImageBuf; 2],
+}
+
+/// A short name for a rejection reason.
+pub fn reason_name(r: &RejectReason) -> &'static str {
+    match r {
+        RejectReason::FacetNotVertical { .. } => "facet_not_vertical",
+        RejectReason::NoTopEdge => "no_top_edge",
+        RejectReason::TopEdgeTooSteep { .. } => "top_edge_too_steep",
+        RejectReason::NoOverlap => "no_overlap",
+        RejectReason::RearInFront { .. } => "rear_in_front",
+        RejectReason::RearOutOfReach { .. } => "rear_out_of_reach",
+        RejectReason::TooWide { .. } => "too_wide",
+        RejectReason::FingerCollision { .. } => "finger_collision",
+        RejectReason::BodyCollision { .. } => "body_collision",
+        RejectReason::NotHighest => "not_highest",
+    }
+}
+
+/// The model the planner uses: scene points (robot frame) to planner pixels (module docs).
+pub fn scene_model(model: &AffineStereo, lever_m: &[f64; 3]) -> AffineStereo {
+    let shift = model.m * Vector3::from(*lever_m) + Vector4::repeat(PLANNER_FROM_TRACKER_PX);
+    AffineStereo { c: model.c + shift, ..model.clone() }
+}
+
+/// Projects a robot-frame scene point into both views, tracker pixels.
+fn project(model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
+    let w = model.m * (p + Vector3::from(*lever_m)) + model.c;
+    [[w[0], w[1]], [w[2], w[3]]]
+}
+
+fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+fn inside(poly: &[[f64; 2]], p: [f64; 2]) -> bool {
+    let mut odd = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+            odd = !odd;
+        }
+    }
+    odd
+}
+
+/// Replaces the pixels inside `poly` (or within `margin_px` of it; tracker pixels) with a
+/// smooth fill from the unmasked pixels around (module docs). Returns how many were masked.
+pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> usize {
+    let (w, h) = (img.width, img.height);
+    if poly.len() < 3 || w == 0 || h == 0 || poly.iter().flatten().any(|v| !v.is_finite()) {
+        return 0;
+    }
+    let lo = |k: usize| poly.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min) - margin_px;
+    let hi = |k: usize| poly.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max) + margin_px;
+    let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64 - 1.0) as usize;
+    let (x0, x1, y0, y1) = (clamp(lo(0).floor(), w), clamp(hi(0).ceil(), w), clamp(lo(1).floor(), h), clamp(hi(1).ceil(), h));
+    let mut masked = vec![false; w * h];
+    let mut count = 0;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let p = [x as f64, y as f64];
+            let near = inside(poly, p) || (0..poly.len()).any(|i| point_segment_distance(p, poly[i], poly[(i + 1) % poly.len()]) <= margin_px);
+            if near {
+                masked[y * w + x] = true;
+                count += 1;
+            }
+        }
+    }
+    if count == 0 || count == w * h {
+        return count;
+    }
+    let src = img.data.clone();
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            if !masked[y * w + x] {
+                continue;
+            }
+            let (mut sum, mut wsum) = (0.0, 0.0);
+            let mut take = |xx: usize, yy: usize, d: usize| {
+                let wt = 1.0 / d as f64;
+                sum += wt * f64::from(src[yy * w + xx]);
+                wsum += wt;
+            };
+            if let Some(d) = (1..=x).find(|&d| !masked[y * w + x - d]) {
+                take(x - d, y, d);
+            }
+            if let Some(d) = (1..w - x).find(|&d| !masked[y * w + x + d]) {
+                take(x + d, y, d);
+            }
+            if let Some(d) = (1..=y).find(|&d| !masked[(y - d) * w + x]) {
+                take(x, y - d, d);
+            }
+            if let Some(d) = (1..h - y).find(|&d| !masked[(y + d) * w + x]) {
+                take(x, y + d, d);
+            }
+            if wsum > 0.0 {
+                img.data[y * w + x] = (sum / wsum).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    count
+}
+
+/// Indices of the vertices kept by Douglas-Peucker on a closed polygon (tolerance `tol`),
+/// at least three, in order.
+pub fn simplify_closed(poly: &[[f64; 2]], tol: f64) -> Vec<usize> {
+    let n = poly.len();
+    if n <= 3 {
+        return (0..n).collect();
+    }
+    // Split at vertex 0 and the vertex farthest from it.
+    let far = (1..n).max_by(|&a, &b| {
+        let d = |i: usize| (poly[i][0] - poly[0][0]).hypot(poly[i][1] - poly[0][1]);
+        d(a).total_cmp(&d(b))
+    });
+    let Some(far) = far else { return (0..n).collect() };
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[far] = true;
+    fn dp(poly: &[[f64; 2]], a: usize, b: usize, tol: f64, keep: &mut [bool]) {
+        // Vertices strictly between a and b, going forward (cyclically).
+        let n = poly.len();
+        let mut best = (0.0, None);
+        let mut i = (a + 1) % n;
+        while i != b {
+            let d = point_segment_distance(poly[i], poly[a], poly[b]);
+            if d > best.0 {
+                best = (d, Some(i));
+            }
+            i = (i + 1) % n;
+        }
+        if let (d, Some(i)) = best
+            && d > tol
+        {
+            keep[i] = true;
+            dp(poly, a, i, tol, keep);
+            dp(poly, i, b, tol, keep);
+        }
+    }
+    dp(poly, 0, far, tol, &mut keep);
+    dp(poly, far, 0, tol, &mut keep);
+    let mut out: Vec<usize> = (0..n).filter(|&i| keep[i]).collect();
+    // Fewer than three: add the vertex farthest from the chord.
+    while out.len() < 3 {
+        let extra = (0..n).filter(|i| !out.contains(i)).max_by(|&a, &b| {
+            let d = |i: usize| point_segment_distance(poly[i], poly[out[0]], poly[out[out.len() - 1]]);
+            d(a).total_cmp(&d(b))
+        });
+        match extra {
+            Some(e) => {
+                out.push(e);
+                out.sort_unstable();
+            }
+            None => break,
+        }
+    }
+    out
+}
+
+fn arr3(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Runs the plan (see the module docs).
+pub fn plan(mut req: PlanRequest) -> PlanOutput {
+    let start = Instant::now();
+    let mut summary = PlanSummary {
+        indicated_m: req.indicated_m,
+        indicated_px: req.indicated_m.map(|p| project(&req.model, &req.lever_m, &Vector3::from(p))),
+        masks_px: req.masks.clone(),
+        ..Default::default()
+    };
+    for (k, img) in req.images.iter_mut().enumerate() {
+        summary.masked_px[k] = mask_and_fill(img, &req.masks[k], req.mask_margin_px);
+    }
+    let scene_model = scene_model(&req.model, &req.lever_m);
+    let toward = req.model.toward_cameras();
+    let geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
+    let t0 = Instant::now();
+    let plan = Planner::new(req.planner).plan(&req.images[0].view(), &req.images[1].view(), &geo);
+    summary.planner_ms = t0.elapsed().as_secs_f64() * 1e3;
+    summary.segments = [plan.left_segments.len(), plan.right_segments.len()];
+    summary.matches = plan.matches.len();
+    summary.planes = plan.planes.len();
+    summary.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
+    let ps = scene_from_plan(&plan, toward, req.max_height_m);
+    let s = PLANNER_FROM_TRACKER_PX;
+    let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
+    for (fi, f) in plan.facets.iter().enumerate() {
+        let component = ps.facets.iter().position(|src| src.plan_facet == fi).map(|k| ps.scene.facets[k].component);
+        summary.facets.push(FacetSummary {
+            plan_facet: fi,
+            left_px: to_tracker(&f.facet.left),
+            right_px: to_tracker(&f.facet.right),
+            corners_m: f.corners_robot_m.clone(),
+            component,
+        });
+    }
+    let indicated = req.indicated_m.map(Vector3::from);
+    let grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
+        Ok(g) => g,
+        Err(e) => {
+            summary.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
+            summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
+            return PlanOutput { summary, target: None, images: req.images };
+        }
+    };
+    let site_summary = |g: Option<&Grasp>, site: &handeye_vision::grasp::GraspSite, reason: Option<String>| {
+        let px = project(&req.model, &req.lever_m, &site.front_m);
+        SiteSummary {
+            plan_facet: ps.facets[site.facet].plan_facet,
+            width_mm: site.width_m * 1e3,
+            site_m: arr3(&site.front_m),
+            centre_m: arr3(&site.centre_m),
+            tool_m: g.map(|g| arr3(&g.tool_m)),
+            yaw_deg: g.map(|g| g.yaw_rad.to_degrees()),
+            site_left_px: px[0],
+            site_right_px: px[1],
+            distance_mm: indicated.map(|p| (site.centre_m.xy() - p.xy()).norm() * 1e3),
+            reason,
+        }
+    };
+    for r in &grasps.rejected {
+        let name = reason_name(&r.reason);
+        *summary.rejected_by_reason.entry(name.to_string()).or_insert(0) += 1;
+        if let Some(site) = &r.site {
+            let detail = match r.reason {
+                RejectReason::FingerCollision { feature } | RejectReason::BodyCollision { feature } => {
+                    let what = match feature {
+                        FeatureRef::Facet(i) => format!("facet {}", ps.facets[i].plan_facet),
+                        FeatureRef::Edge(EdgeRef::Facet { facet, .. }) => format!("an edge of facet {}", ps.facets[facet].plan_facet),
+                        FeatureRef::Edge(EdgeRef::Loose(i)) => format!("edge {}", ps.edge_matches[i]),
+                    };
+                    format!("{name} with {what}")
+                }
+                RejectReason::TooWide { width_m } => format!("{name} ({:.0} mm)", width_m * 1e3),
+                _ => name.to_string(),
+            };
+            summary.rejected_sites.push(site_summary(None, site, Some(detail)));
+        }
+    }
+    summary.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
+    summary.chosen = summary.candidates.first().cloned();
+    let target = grasps.chosen.map(|g| {
+        let src = &ps.facets[g.site.facet];
+        let cyclopean: Vec<[f64; 2]> = src.left_px.iter().zip(&src.right_px).map(|(l, r)| [(l[0] + r[0]) / 2.0, (l[1] + r[1]) / 2.0]).collect();
+        let keep = simplify_closed(&cyclopean, 1.5);
+        let pick = |poly: &[[f64; 2]]| -> Vec<[f64; 2]> { keep.iter().map(|&i| [poly[i][0] - s, poly[i][1] - s]).collect() };
+        PlannedTarget {
+            left_px: pick(&src.left_px),
+            right_px: pick(&src.right_px),
+            width_m: g.site.width_m.max(0.0),
+            site_px: project(&req.model, &req.lever_m, &g.site.front_m),
+            site_m: arr3(&g.site.front_m),
+            tool_m: arr3(&g.tool_m),
+        }
+    });
+    summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
+    PlanOutput { summary, target, images: req.images }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fill_leaves_no_step_at_the_mask_border() {
+        // A left-to-right ramp with a bright square on it; masking the square gives back the
+        // ramp (to rounding), so no edge is left at the mask's border.
+        let (w, h) = (60, 40);
+        let mut img = ImageBuf::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let inside = (20..35).contains(&x) && (10..25).contains(&y);
+                img.set(x, y, if inside { 250 } else { (50 + 2 * x) as u8 });
+            }
+        }
+        let sq = [[20.0, 10.0], [34.0, 10.0], [34.0, 24.0], [20.0, 24.0]];
+        let n = mask_and_fill(&mut img, &sq, 1.0);
+        assert_eq!(n, 17 * 17);
+        for y in 0..h {
+            for x in 0..w {
+                let want = (50 + 2 * x) as i32;
+                assert!((i32::from(img.get(x, y)) - want).abs() <= 1, "({x}, {y}): {} vs {want}", img.get(x, y));
+            }
+        }
+        // Nothing to mask, or a bad polygon: the image is untouched.
+        let before = img.clone();
+        assert_eq!(mask_and_fill(&mut img, &[[1.0, 1.0], [2.0, 2.0]], 1.0), 0);
+        assert_eq!(mask_and_fill(&mut img, &[[f64::NAN, 1.0], [2.0, 2.0], [3.0, 1.0]], 1.0), 0);
+        assert_eq!(img, before);
+    }
+
+    #[test]
+    fn simplification_drops_slivers_and_keeps_corners() {
+        // A square whose corner (10, 0) is split into two vertices 1 px apart, plus a point
+        // in the middle of a side.
+        let poly = [[0.0, 0.0], [9.0, 0.0], [10.0, 1.0], [10.0, 10.0], [5.0, 10.2], [0.0, 10.0]];
+        let keep = simplify_closed(&poly, 1.5);
+        assert_eq!(keep.len(), 4, "{keep:?}");
+        assert!(keep.contains(&0) && keep.contains(&5));
+        // A triangle stays a triangle.
+        assert_eq!(simplify_closed(&[[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]], 1.5), vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn the_scene_model_puts_a_point_where_the_reference_point_would_image_it() {
+        // Model: u = 1000 x + 100, v = −1000 z + 200, u' = 1000 x + 50 y + 90, v' = −1000 z + 200.
+        let mut m = nalgebra::Matrix4x3::zeros();
+        m[(0, 0)] = 1000.0;
+        m[(1, 2)] = -1000.0;
+        m[(2, 0)] = 1000.0;
+        m[(2, 1)] = 50.0;
+        m[(3, 2)] = -1000.0;
+        let model = AffineStereo { m, c: Vector4::new(100.0, 200.0, 90.0, 200.0), residual_rms_px: 0.0, disparity_range_px: [0.0, 1.0] };
+        let lever = [0.0, 0.0, -0.1]; // the tool 0.1 m below the reference point
+        // A scene point at (0.1, 0, 0.2) images where the reference point does with the tool
+        // at (0.1, 0, 0.1).
+        let p = Vector3::new(0.1, 0.0, 0.2);
+        let [l, r] = project(&model, &lever, &p);
+        let w = model.m * Vector3::new(0.1, 0.0, 0.1) + model.c;
+        assert_eq!([l[0], l[1], r[0], r[1]], [w[0], w[1], w[2], w[3]]);
+        // The planner's model reconstructs it from planner pixels (+0.5).
+        let sm = scene_model(&model, &lever);
+        let back = sm.reconstruct(&[l[0] + 0.5, l[1] + 0.5, r[0] + 0.5, r[1] + 0.5]);
+        assert!((back - p).norm() < 1e-9, "{back:?}");
+    }
+}
