@@ -240,6 +240,10 @@ pub struct PlanSettings {
     pub finger_breadth_m: f64,
     /// Widest grasp the planner accepts (the thesis's 50 mm), m.
     pub max_width_m: f64,
+    /// Facets facing further than this from the cameras in plan view are not grasped: the
+    /// plate, normal to the jaws' closing axis, ends up as oblique as the facet, and beyond
+    /// ~50° the servo's view of its marks degenerates, degrees.
+    pub max_view_angle_deg: f64,
     /// Time-out of the phase (park, settle, plan), s.
     pub timeout_s: f64,
 }
@@ -258,6 +262,7 @@ impl Default for PlanSettings {
             finger_thickness_m: 0.012,
             finger_breadth_m: 0.020,
             max_width_m: 0.050,
+            max_view_angle_deg: 45.0,
             timeout_s: 20.0,
         }
     }
@@ -481,6 +486,7 @@ impl DaemonConfig {
             ("plan.finger_thickness_m", self.plan.finger_thickness_m),
             ("plan.finger_breadth_m", self.plan.finger_breadth_m),
             ("plan.max_width_m", self.plan.max_width_m),
+            ("plan.max_view_angle_deg", self.plan.max_view_angle_deg),
             ("servo.max_step_m", self.servo.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),
             ("servo.timeout_s", self.servo.timeout_s),

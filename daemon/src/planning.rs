@@ -11,9 +11,9 @@
 //! robot coordinates.
 //!
 //! **Masking.** The gripper (plate, palm and open fingers) is in view while the planner
-//! looks: its pixels are replaced by a smooth fill (each masked pixel the inverse-distance
-//! mean of the nearest unmasked pixels left, right, above and below), which leaves no step
-//! at the mask's border, so no edges come from the gripper or the mask. The rest of the arm
+//! looks: its pixels are replaced by a harmonic fill (Laplace's equation with the pixels
+//! around the mask as boundary values), which leaves no step at the mask's border and no
+//! edge inside it, so no edges come from the gripper or the mask. The rest of the arm
 //! is above the parked tool point; features that high are dropped from the grasp scene.
 //!
 //! **Target polygons.** The chosen facet's outline initialises the target trackers: its
@@ -120,6 +120,9 @@ pub struct PlanSummary {
     /// The gripper's masked region in both views, tracker pixels.
     pub masks_px: [Vec<[f64; 2]>; 2],
     pub masked_px: [usize; 2],
+    /// The model the planner used (scene points to planner pixels: `handeye plan --calib`
+    /// reads this object): `m` rows, `c`, `disparity_range_px`, `residual_rms_px`.
+    pub model: Option<serde_json::Value>,
     /// Epipolar bootstrap: RMS before and after, px.
     pub bootstrap_rms_px: Option<[f64; 2]>,
     pub planner_ms: f64,
@@ -140,6 +143,7 @@ pub struct PlanOutput {
 pub fn reason_name(r: &RejectReason) -> &'static str {
     match r {
         RejectReason::FacetNotVertical { .. } => "facet_not_vertical",
+        RejectReason::TurnedFromViewer { .. } => "turned_from_cameras",
         RejectReason::NoTopEdge => "no_top_edge",
         RejectReason::TopEdgeTooSteep { .. } => "top_edge_too_steep",
         RejectReason::NoOverlap => "no_overlap",
@@ -209,16 +213,25 @@ pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> u
     if count == 0 || count == w * h {
         return count;
     }
+    // Harmonic fill: the masked pixels solve Laplace's equation with the unmasked pixels
+    // around as boundary values (over-relaxed Gauss-Seidel, from the row/column
+    // interpolation as a start). Smooth inside, no step at the border: a step in the
+    // background that crosses the mask (the arm's silhouette) is spread into a gentle ramp
+    // that no edge detector takes for an edge.
     let src = img.data.clone();
+    let (bw, bh) = (x1 - x0 + 1, y1 - y0 + 1);
+    let mut v = vec![0f32; bw * bh];
     for y in y0..=y1 {
         for x in x0..=x1 {
+            let i = (y - y0) * bw + (x - x0);
             if !masked[y * w + x] {
+                v[i] = f32::from(src[y * w + x]);
                 continue;
             }
             let (mut sum, mut wsum) = (0.0, 0.0);
             let mut take = |xx: usize, yy: usize, d: usize| {
-                let wt = 1.0 / d as f64;
-                sum += wt * f64::from(src[yy * w + xx]);
+                let wt = 1.0 / d as f32;
+                sum += wt * f32::from(src[yy * w + xx]);
                 wsum += wt;
             };
             if let Some(d) = (1..=x).find(|&d| !masked[y * w + x - d]) {
@@ -233,10 +246,58 @@ pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> u
             if let Some(d) = (1..h - y).find(|&d| !masked[(y + d) * w + x]) {
                 take(x, y + d, d);
             }
-            if wsum > 0.0 {
-                img.data[y * w + x] = (sum / wsum).round().clamp(0.0, 255.0) as u8;
+            v[i] = if wsum > 0.0 { sum / wsum } else { 128.0 };
+        }
+    }
+    // Neighbours outside the box are outside the mask too (the box holds the whole mask),
+    // so the box's own border rows and columns are fixed values.
+    let cells: Vec<(usize, usize)> = (y0..=y1).flat_map(|y| (x0..=x1).map(move |x| (x, y))).filter(|&(x, y)| masked[y * w + x]).collect();
+    let omega = 1.9f32;
+    for _ in 0..400 {
+        let mut change = 0f32;
+        for &(x, y) in &cells {
+            let i = (y - y0) * bw + (x - x0);
+            let (mut sum, mut n) = (0f32, 0f32);
+            if x > x0 {
+                sum += v[i - 1];
+                n += 1.0;
+            } else if x > 0 {
+                sum += f32::from(src[y * w + x - 1]);
+                n += 1.0;
+            }
+            if x < x1 {
+                sum += v[i + 1];
+                n += 1.0;
+            } else if x + 1 < w {
+                sum += f32::from(src[y * w + x + 1]);
+                n += 1.0;
+            }
+            if y > y0 {
+                sum += v[i - bw];
+                n += 1.0;
+            } else if y > 0 {
+                sum += f32::from(src[(y - 1) * w + x]);
+                n += 1.0;
+            }
+            if y < y1 {
+                sum += v[i + bw];
+                n += 1.0;
+            } else if y + 1 < h {
+                sum += f32::from(src[(y + 1) * w + x]);
+                n += 1.0;
+            }
+            if n > 0.0 {
+                let d = omega * (sum / n - v[i]);
+                v[i] += d;
+                change = change.max(d.abs());
             }
         }
+        if change < 0.05 {
+            break;
+        }
+    }
+    for &(x, y) in &cells {
+        img.data[y * w + x] = v[(y - y0) * bw + (x - x0)].round().clamp(0.0, 255.0) as u8;
     }
     count
 }
@@ -314,6 +375,12 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         summary.masked_px[k] = mask_and_fill(img, &req.masks[k], req.mask_margin_px);
     }
     let scene_model = scene_model(&req.model, &req.lever_m);
+    summary.model = Some(serde_json::json!({
+        "m": (0..4).map(|r| [scene_model.m[(r, 0)], scene_model.m[(r, 1)], scene_model.m[(r, 2)]]).collect::<Vec<_>>(),
+        "c": [scene_model.c[0], scene_model.c[1], scene_model.c[2], scene_model.c[3]],
+        "disparity_range_px": scene_model.disparity_range_px,
+        "residual_rms_px": scene_model.residual_rms_px,
+    }));
     let toward = req.model.toward_cameras();
     let geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     let t0 = Instant::now();
@@ -417,7 +484,7 @@ mod tests {
         }
         let sq = [[20.0, 10.0], [34.0, 10.0], [34.0, 24.0], [20.0, 24.0]];
         let n = mask_and_fill(&mut img, &sq, 1.0);
-        assert_eq!(n, 17 * 17);
+        assert_eq!(n, 17 * 17 - 4, "the square and 1 px around it, less the far corners");
         for y in 0..h {
             for x in 0..w {
                 let want = (50 + 2 * x) as i32;

@@ -76,6 +76,14 @@ impl ReportWriter {
                 let json = out.join("plan.json");
                 let text = serde_json::to_string_pretty(&p.summary).map_err(|e| format!("{}: {e}", json.display()))?;
                 std::fs::write(&json, text).map_err(|e| format!("{}: {e}", json.display()))?;
+                // The pair as the planner saw it, for `handeye plan --calib plan.json`.
+                for (name, img) in [("plan_left.png", &p.images[0]), ("plan_right.png", &p.images[1])] {
+                    let path = out.join(name);
+                    image::GrayImage::from_raw(img.width as u32, img.height as u32, img.data.clone())
+                        .ok_or_else(|| format!("{}: bad image size", path.display()))?
+                        .save(&path)
+                        .map_err(|e| format!("{}: {e}", path.display()))?;
+                }
                 let path = out.join(format!("{count:02}_plan.png"));
                 plan_overlay(&p).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
             }

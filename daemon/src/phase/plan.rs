@@ -148,6 +148,7 @@ impl PlanPhase {
                         max_width_m: p.max_width_m,
                         ..GripperModel::default()
                     },
+                    max_view_angle_rad: p.max_view_angle_deg.min(90.0).to_radians(),
                     ..GraspConfig::default()
                 };
                 // Allocates once: the pair the planner works on.

@@ -17,6 +17,10 @@
 //! 5. The highest collision-free site of each facet is kept; the one nearest the indicated
 //!    point (in plan view) is chosen.
 //!
+//! Optionally (`max_view_angle_rad`) facets turned too far from the viewer in plan view are
+//! left out: a gripper whose tracked face is normal to the jaws' closing axis ends up as
+//! oblique to the cameras as the facet it grasps.
+//!
 //! Every site that fails a rule is kept in [`GraspPlan::rejected`] with its reason.
 //!
 //! # Choices the thesis leaves open
@@ -174,6 +178,12 @@ pub struct GraspConfig {
     pub contact_tolerance_m: f64,
     /// Largest height difference between the top edge and the rear edge at the site, metres.
     pub max_rear_drop_m: f64,
+    /// Largest angle, in plan view, between a facet's normal and the direction towards the
+    /// viewer. Not a rule of the thesis: a gripper whose tracked face turns with the jaws
+    /// (the simulator's plate is normal to the closing axis) can only be servoed onto a
+    /// facet that the cameras see well. `FRAC_PI_2` (the default) allows any facet that
+    /// faces the viewer at all.
+    pub max_view_angle_rad: f64,
 }
 
 impl Default for GraspConfig {
@@ -186,6 +196,7 @@ impl Default for GraspConfig {
             min_overlap_m: 0.005,
             contact_tolerance_m: 0.003,
             max_rear_drop_m: 0.025,
+            max_view_angle_rad: std::f64::consts::FRAC_PI_2,
         }
     }
 }
@@ -211,6 +222,8 @@ pub enum GraspError {
 pub enum RejectReason {
     /// The facet is more than `max_facet_tilt_rad` from vertical.
     FacetNotVertical { tilt_rad: f64 },
+    /// In plan view the facet faces more than `max_view_angle_rad` away from the viewer.
+    TurnedFromViewer { angle_rad: f64 },
     /// The facet has no edge with the facet below it.
     NoTopEdge,
     /// A top edge more than `max_edge_slope_rad` from horizontal.
@@ -333,6 +346,9 @@ impl GraspConfig {
             if value >= std::f64::consts::FRAC_PI_2 {
                 return Err(GraspError::Config { field, value });
             }
+        }
+        if !(self.max_view_angle_rad > 0.0 && self.max_view_angle_rad <= std::f64::consts::FRAC_PI_2) {
+            return Err(GraspError::Config { field: "max_view_angle_rad", value: self.max_view_angle_rad });
         }
         Ok(())
     }
@@ -507,6 +523,14 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
             continue;
         }
         let jaw = -Vector3::new(n[0], n[1], 0.0).normalize();
+        let toward = Vector3::new(scene.toward_viewer[0], scene.toward_viewer[1], 0.0);
+        if config.max_view_angle_rad < std::f64::consts::FRAC_PI_2 && toward.norm() > 1e-12 {
+            let angle_rad = (-jaw).dot(&toward.normalize()).clamp(-1.0, 1.0).acos();
+            if angle_rad > config.max_view_angle_rad {
+                rejected.push(reject(None, None, None, RejectReason::TurnedFromViewer { angle_rad }));
+                continue;
+            }
+        }
         let along = Vector3::z().cross(&jaw);
         let centroid = facet.polygon_m.iter().sum::<Vector3<f64>>() / facet.polygon_m.len() as f64;
         let mut facet_sites: Vec<Grasp> = Vec::new();

@@ -307,3 +307,24 @@ fn a_gripper_that_only_opens_fully_sweeps_its_fingers_out_to_the_full_opening() 
     let bad = GraspConfig { gripper: GripperModel { jaw_opening_m: Some(0.03), ..Default::default() }, ..Default::default() };
     assert!(matches!(plan_grasps(&s, None, &bad), Err(GraspError::Config { field: "gripper.jaw_opening_m", .. })));
 }
+
+#[test]
+fn facets_turned_from_the_viewer_can_be_left_out() {
+    // A cube turned 50° about z, the viewer along +x: its two visible sides face 50° and
+    // 40° away from it in plan view.
+    let (c, s) = (50f64.to_radians().cos(), 50f64.to_radians().sin());
+    let r = |x: f64, y: f64, z: f64| p(c * x - s * y, s * x + c * y, z);
+    let side = |a: [f64; 2], b: [f64; 2]| facet(vec![r(a[0], a[1], 0.0), r(b[0], b[1], 0.0), r(b[0], b[1], 0.04), r(a[0], a[1], 0.04)], 0);
+    let facets = vec![
+        side([0.02, -0.02], [0.02, 0.02]),   // normal at 50°
+        side([-0.02, -0.02], [0.02, -0.02]), // normal at −40°
+        facet(vec![r(-0.02, -0.02, 0.04), r(0.02, -0.02, 0.04), r(0.02, 0.02, 0.04), r(-0.02, 0.02, 0.04)], 0),
+    ];
+    let s = GraspScene { facets, edges: vec![], toward_viewer: p(1.0, 0.0, 0.6) };
+    assert_eq!(plan(&s).candidates.len(), 2, "by default both sides");
+    let cfg = GraspConfig { max_view_angle_rad: 45f64.to_radians(), ..Default::default() };
+    let limited = plan_grasps(&s, None, &cfg).unwrap();
+    assert_eq!(limited.candidates.len(), 1);
+    assert_eq!(limited.chosen.unwrap().site.facet, 1);
+    assert!(matches!(reasons_for(&limited, 0)[..], [RejectReason::TurnedFromViewer { angle_rad }] if (angle_rad.to_degrees() - 50.0).abs() < 1e-9));
+}
