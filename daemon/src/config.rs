@@ -244,6 +244,10 @@ pub struct PlanSettings {
     /// plate, normal to the jaws' closing axis, ends up as oblique as the facet, and beyond
     /// ~50° the servo's view of its marks degenerates, degrees.
     pub max_view_angle_deg: f64,
+    /// The grasp nearest the indicated point must be this close to it (plan view, grasp
+    /// centre), or the block the operator meant has no grasp site and the plan fails (rather
+    /// than grasp another block), m.
+    pub max_site_distance_m: f64,
     /// Time-out of the phase (park, settle, plan), s.
     pub timeout_s: f64,
 }
@@ -263,6 +267,7 @@ impl Default for PlanSettings {
             finger_breadth_m: 0.020,
             max_width_m: 0.050,
             max_view_angle_deg: 45.0,
+            max_site_distance_m: 0.06,
             timeout_s: 20.0,
         }
     }
@@ -487,6 +492,7 @@ impl DaemonConfig {
             ("plan.finger_breadth_m", self.plan.finger_breadth_m),
             ("plan.max_width_m", self.plan.max_width_m),
             ("plan.max_view_angle_deg", self.plan.max_view_angle_deg),
+            ("plan.max_site_distance_m", self.plan.max_site_distance_m),
             ("servo.max_step_m", self.servo.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),
             ("servo.timeout_s", self.servo.timeout_s),

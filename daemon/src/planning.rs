@@ -49,6 +49,9 @@ pub struct PlanRequest {
     pub indicated_m: Option<[f64; 3]>,
     /// Features entirely above this height are the arm, m.
     pub max_height_m: f64,
+    /// A grasp whose centre is farther than this from the indicated point (plan view) is
+    /// not on the block the operator meant: no grasp then, m.
+    pub max_distance_m: f64,
     pub planner: PlannerConfig,
     pub grasp: GraspConfig,
     pub disparity_margin: f64,
@@ -358,6 +361,24 @@ pub fn simplify_closed(poly: &[[f64; 2]], tol: f64) -> Vec<usize> {
     out
 }
 
+/// `keep` (indices into `poly`, in order) rotated to start at the corner whose two sides
+/// span the largest parallelogram: a tracker's template frame is `e1 = c1 − c0`,
+/// `e2 = c_{n−1} − c0`, and the servo's view of the facet (its `s, t` rows and plane
+/// transfer) is only as well conditioned as that frame; a short side at a notch of an L
+/// would make it lopsided.
+pub fn tracker_order(poly: &[[f64; 2]], keep: &[usize]) -> Vec<usize> {
+    let n = keep.len();
+    if n < 3 {
+        return keep.to_vec();
+    }
+    let area = |k: usize| {
+        let (o, a, b) = (poly[keep[k]], poly[keep[(k + 1) % n]], poly[keep[(k + n - 1) % n]]);
+        ((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])).abs()
+    };
+    let best = (0..n).max_by(|&a, &b| area(a).total_cmp(&area(b)).then(b.cmp(&a))).unwrap_or(0);
+    (0..n).map(|k| keep[(best + k) % n]).collect()
+}
+
 fn arr3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
@@ -447,11 +468,17 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         }
     }
     summary.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
-    summary.chosen = summary.candidates.first().cloned();
-    let target = grasps.chosen.map(|g| {
+    // The block nearest the point has no grasp site if the nearest site is far from it.
+    let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.max_distance_m);
+    let chosen = grasps.chosen.filter(near);
+    if grasps.chosen.is_some() && chosen.is_none() {
+        summary.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
+    }
+    summary.chosen = chosen.as_ref().and_then(|_| summary.candidates.first().cloned());
+    let target = chosen.map(|g| {
         let src = &ps.facets[g.site.facet];
         let cyclopean: Vec<[f64; 2]> = src.left_px.iter().zip(&src.right_px).map(|(l, r)| [(l[0] + r[0]) / 2.0, (l[1] + r[1]) / 2.0]).collect();
-        let keep = simplify_closed(&cyclopean, 1.5);
+        let keep = tracker_order(&cyclopean, &simplify_closed(&cyclopean, 1.5));
         let pick = |poly: &[[f64; 2]]| -> Vec<[f64; 2]> { keep.iter().map(|&i| [poly[i][0] - s, poly[i][1] - s]).collect() };
         PlannedTarget {
             left_px: pick(&src.left_px),
@@ -508,6 +535,10 @@ mod tests {
         assert!(keep.contains(&0) && keep.contains(&5));
         // A triangle stays a triangle.
         assert_eq!(simplify_closed(&[[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]], 1.5), vec![0, 1, 2]);
+        // An L (tall leg on the right): the frame starts at the corner with the longest
+        // sides, the bottom-right one (40 across, 40 up).
+        let l = [[0.0, 0.0], [0.0, -20.0], [20.0, -20.0], [20.0, -40.0], [40.0, -40.0], [40.0, 0.0]];
+        assert_eq!(tracker_order(&l, &[0, 1, 2, 3, 4, 5]), vec![5, 0, 1, 2, 3, 4]);
     }
 
     #[test]

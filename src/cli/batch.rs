@@ -93,7 +93,7 @@ struct Job {
 struct Outcome {
     job: Job,
     success: bool,
-    /// The phase the run ended in (`final_phase`, or `run` when `handeye run` itself failed).
+    /// The working phase the run got to (`run` when `handeye run` itself failed).
     phase: String,
     reason: Option<String>,
     servo_steps: Option<f64>,
@@ -196,7 +196,8 @@ fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
         return failed(format!("handeye run gave no result: {}", tail(&String::from_utf8_lossy(&output.stderr), 2)));
     };
     let success = summary["success"] == true;
-    let phase = summary["final_phase"].as_str().or(summary["phase_reached"].as_str()).unwrap_or("unknown").to_string();
+    // The working phase the run got to (its final phase is just `failed` or `stopped`).
+    let phase = summary["phase_reached"].as_str().unwrap_or("unknown").to_string();
     Outcome {
         job: job.clone(),
         success,
@@ -350,8 +351,8 @@ fn table(report: &Value) -> String {
                 s,
                 "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
                 name,
-                g["runs"],
-                g["successes"],
+                g["runs"].as_u64().unwrap_or(0),
+                g["successes"].as_u64().unwrap_or(0),
                 100.0 * g["success_rate"].as_f64().unwrap_or(0.0),
                 f(&g["median_servo_steps"], ""),
                 f(&g["median_run_wall_s"], " s")
@@ -362,8 +363,8 @@ fn table(report: &Value) -> String {
         s,
         "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
         "all",
-        report["runs"],
-        report["successes"],
+        report["runs"].as_u64().unwrap_or(0),
+        report["successes"].as_u64().unwrap_or(0),
         100.0 * report["success_rate"].as_f64().unwrap_or(0.0),
         f(&report["median_servo_steps"], ""),
         f(&report["median_run_wall_s"], " s")
@@ -372,7 +373,7 @@ fn table(report: &Value) -> String {
         let _ = writeln!(s, "\nfailures by phase and reason:");
         for fl in list {
             let runs: Vec<&str> = fl["runs"].as_array().map(|r| r.iter().filter_map(Value::as_str).collect()).unwrap_or_default();
-            let _ = writeln!(s, "  {:>3} x {}: {} ({})", fl["count"], fl["phase"].as_str().unwrap_or("?"), fl["reason"].as_str().unwrap_or("?"), runs.join(", "));
+            let _ = writeln!(s, "  {:>3} x {}: {} ({})", fl["count"].as_u64().unwrap_or(0), fl["phase"].as_str().unwrap_or("?"), fl["reason"].as_str().unwrap_or("?"), runs.join(", "));
         }
     }
     let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report["wall_s"].as_f64().unwrap_or(0.0));

@@ -160,6 +160,7 @@ impl PlanPhase {
                     mask_margin_px: p.mask_margin_px,
                     indicated_m: m.indicated_m,
                     max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
+                    max_distance_m: p.max_site_distance_m,
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,
@@ -198,6 +199,13 @@ impl PlanPhase {
                 m.plan = Some(summary.clone());
                 m.plan_report = Some(out);
                 let Some(t) = target else {
+                    if let (Some(nearest), Some(_)) = (summary.candidates.first(), m.indicated_m) {
+                        return Step::Fail(format!(
+                            "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away)",
+                            m.cfg.plan.max_site_distance_m * 1e3,
+                            nearest.distance_mm.unwrap_or(f64::NAN)
+                        ));
+                    }
                     let reasons: Vec<String> = summary.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
                     return Step::Fail(format!(
                         "plan: no grasp site ({} facets; rejected: {})",
@@ -213,8 +221,12 @@ impl PlanPhase {
     }
 }
 
-fn target_spec(t: &PlannedTarget, m: &Mission) -> TargetSpec {
-    let floor = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m;
+/// The target for the later phases. The grasp goes down to the configured height above the
+/// table (the robot's own kinematics are exact), not to the plan's low-water mark: the plan's
+/// heights come from the affine model extrapolated 10-15 cm below the cage of reference
+/// points, and came out ~2 cm high on 30-40 mm blocks (fingers closing above a bar). The
+/// plan's width sets how far the jaws go past the facet.
+fn target_spec(t: &PlannedTarget, _m: &Mission) -> TargetSpec {
     TargetSpec {
         source: TargetSource::Plan,
         left_px: t.left_px.clone(),
@@ -222,7 +234,7 @@ fn target_spec(t: &PlannedTarget, m: &Mission) -> TargetSpec {
         depth_m: t.width_m,
         site_px: Some(t.site_px),
         site_template: None,
-        grasp_tool_z_m: Some(t.tool_m[2].max(floor)),
+        grasp_tool_z_m: None,
     }
 }
 
