@@ -295,7 +295,12 @@ pub struct ServoSettings {
     /// Length that turns yaw into a distance for the servo's step metric, m: about the
     /// distance of the marks from the reference point.
     pub yaw_lever_m: f64,
-    /// Smallest accepted condition of the weighted Jacobian (see `ServoConfig`).
+    /// Smallest accepted condition of the weighted Jacobian (see `ServoConfig`). The angle
+    /// row is weighted by the plate axis's image length per metre (~1200 px), which makes
+    /// it the largest singular value by far (~45000, yaw scaled by `yaw_lever_m`) while the
+    /// three translations are seen with ~600-2000: a sound view of a facet has a condition of
+    /// ~0.01-0.04 (0.013 on a bar face seen straight on), a face seen edge-on drops it
+    /// towards 0.
     pub min_condition: f64,
     /// Frames to wait after the arm arrives before measuring again.
     pub settle_frames: u32,
@@ -327,7 +332,7 @@ impl Default for ServoSettings {
             max_across_px: 25.0,
             max_across_ratio: 0.3,
             yaw_lever_m: 0.025,
-            min_condition: 0.02,
+            min_condition: 0.004,
             settle_frames: 2,
             speed_mps: 0.08,
             grasp_height_m: 0.010,

@@ -349,7 +349,12 @@ impl ServoPhase {
             });
         }
         match step.outcome {
-            StepOutcome::Failed(f) => Step::Fail(format!("servo: {f}")),
+            StepOutcome::Failed(f) => {
+                if let Ok(j) = self.servo.model().jacobian(&target, &gripper) {
+                    tracing::warn!(jacobian = ?j, ?target, ?gripper, measurement = ?step.measurement, "servo failed");
+                }
+                Step::Fail(format!("servo: {f}"))
+            }
             StepOutcome::Move | StepOutcome::Converged => {
                 if step.outcome == StepOutcome::Converged {
                     self.stage = Stage::Servo { converging: true };
