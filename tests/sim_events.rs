@@ -17,11 +17,14 @@ fn optical_axis(sim: &Simulator, cam: usize) -> DVec3 {
 fn camera_bump_turns_one_camera_by_its_angle_at_its_time() {
     let mut sim = Simulator::new(scenario("pick_cube_bump.toml")).expect("simulator");
     let (left0, right0) = (optical_axis(&sim, 0), optical_axis(&sim, 1));
-    // 12 s at 30 frames/s: unchanged through frame 359, bumped once frame 360 starts.
-    for _ in 0..360 {
+    // At the event's time (frames at 30 frames/s): unchanged through the frame before,
+    // bumped once the frame at that time starts.
+    let at_s = sim.scenario.events.iter().find_map(|e| matches!(e, Event::CameraBump { .. }).then(|| e.at_s())).expect("a bump");
+    let at_frame = (at_s * f64::from(sim.scenario.render.frame_rate_hz)).round() as usize;
+    for _ in 0..at_frame {
         sim.step_frame();
     }
-    assert_eq!(optical_axis(&sim, 0), left0, "not before 12 s");
+    assert_eq!(optical_axis(&sim, 0), left0, "not before {at_s} s");
     sim.step_frame();
     let angle = optical_axis(&sim, 0).angle_between(left0).to_degrees();
     assert!((angle - 3.0).abs() < 1e-6, "left camera turned {angle}°");

@@ -1,1 +1,27 @@
-//! placeholder
+//! handeye's daemon: the hard loop that closes hand-eye coordination over shared memory.
+//!
+//! Per stereo frame ([`hard_loop::HardLoop::cycle`]): update the gripper and target trackers
+//! over the frame's pixels in place, check safety, run the current [`phase`], answer the
+//! frame with exactly one robot command and publish one telemetry sample. Phases: acquire
+//! gripper → calibrate → acquire target (operator hint) → coplanarity servo → grasp → lift
+//! → done (or failed / stopped, with a reason). Work longer than a frame runs on a
+//! [`worker`] thread; report images are encoded on another ([`report`]). [`service`] runs it
+//! all against the `handeye/*` services of a domain, whoever publishes them.
+
+pub mod config;
+pub mod gripper;
+pub mod hard_loop;
+pub mod hint;
+pub mod outcome;
+pub mod phase;
+pub mod recovery;
+pub mod report;
+pub mod safety;
+pub mod service;
+pub mod timing;
+pub mod worker;
+
+pub use config::DaemonConfig;
+pub use hard_loop::HardLoop;
+pub use hint::OperatorHint;
+pub use outcome::DaemonOutcome;

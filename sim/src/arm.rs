@@ -5,7 +5,7 @@
 //! Body frames at the joint zero configuration are all aligned with the robot frame (the arm
 //! stretched along +x, the gripper pointing along +x); see `kinematics` for the joint
 //! conventions. Palm frame: x along the tool axis (from the roll flange towards the finger
-//! tips), y the finger closing axis, z the normal of the tracked plate.
+//! tips), y the finger closing axis and the normal of the tracked plate (on the palm's +y face).
 //!
 //! What made grasping work (CRATE_NOTES §3.5 plus what this arm needed, each observed):
 //! multibody self-contacts off; force-based, stiff arm motors (acceleration-based ones left
@@ -34,12 +34,12 @@ pub mod groups {
 
 /// Finger travel: each finger's inner face moves 0..40 mm from the centre line.
 pub const FINGER_TRAVEL_M: f64 = 0.040;
-/// Finger cross-section: thickness along the closing axis and width along the plate normal.
+/// Finger cross-section: thickness along the closing axis and width across it.
 pub const FINGER_THICKNESS_M: f64 = 0.012;
 pub const FINGER_WIDTH_M: f64 = 0.020;
 /// Half width of the palm across the fingers and half its thickness, metres.
 pub const PALM_HALF_WIDTH_M: f64 = 0.056;
-pub const PALM_HALF_THICKNESS_M: f64 = 0.02;
+pub const PALM_HALF_THICKNESS_M: f64 = 0.028;
 /// Finger squeeze force when closed, newtons. With friction ~1 it holds ~10 N, ten times the
 /// heaviest block; squeezing harder (15-20 N) made rapier's contact solver push light blocks
 /// out of the jaws in a third of the trials, 3-7 N held in all of them.

@@ -8,6 +8,7 @@ pub mod controller;
 pub mod events;
 pub mod geometry;
 pub mod hash;
+pub mod hint;
 pub mod judge;
 pub mod kinematics;
 pub mod render;
@@ -19,6 +20,7 @@ pub mod script;
 pub mod simulator;
 pub mod transport;
 pub mod truth;
+pub mod watch;
 pub mod world;
 
 pub use scenario::{Scenario, ScenarioError};

@@ -8,7 +8,7 @@
 
 use std::time::{Duration, Instant};
 
-use handeye_wire::{RobotCommand, RobotState};
+use handeye_wire::{RobotCommand, RobotState, Telemetry};
 
 use crate::hash::FramesHash;
 use crate::render::{RenderError, Renderer};
@@ -52,6 +52,11 @@ pub trait Transport {
     /// Whether the process was asked to stop (SIGINT/SIGTERM).
     fn interrupted(&self) -> bool {
         false
+    }
+    /// Appends the daemon's telemetry samples that have arrived (without blocking), for the
+    /// [`DaemonWatch`](crate::watch::DaemonWatch). A transport without telemetry has none.
+    fn receive_telemetry(&mut self, _out: &mut Vec<Telemetry>) -> Result<(), RunError> {
+        Ok(())
     }
 }
 
@@ -115,12 +120,26 @@ pub struct Runner {
     /// Hash of each published frame, in order (kept only when `keep_frame_hashes`).
     pub frame_hashes: Vec<u64>,
     pub keep_frame_hashes: bool,
+    /// What the daemon claims, judged from ground truth.
+    pub watch: crate::watch::DaemonWatch,
+    ids: Vec<u32>,
+    telemetry: Vec<Telemetry>,
 }
 
 impl Runner {
     pub fn new(sim: Simulator) -> Result<Self, RenderError> {
-        let renderer = Renderer::for_scene(&sim.scene, &sim.events.cameras)?;
-        Ok(Self { sim, renderer, poses: Vec::new(), hash: FramesHash::default(), frame_hashes: Vec::new(), keep_frame_hashes: false })
+        let renderer = Renderer::for_scene_with(&sim.scene, &sim.events.cameras, sim.scenario.render.antialias)?;
+        Ok(Self {
+            sim,
+            renderer,
+            poses: Vec::new(),
+            hash: FramesHash::default(),
+            frame_hashes: Vec::new(),
+            keep_frame_hashes: false,
+            watch: crate::watch::DaemonWatch::default(),
+            ids: Vec::new(),
+            telemetry: Vec::new(),
+        })
     }
 
     /// Metadata of the frame the current state would give.
@@ -141,6 +160,37 @@ impl Runner {
         let h = self.hash.add(out);
         if self.keep_frame_hashes {
             self.frame_hashes.push(h);
+        }
+        Ok(())
+    }
+
+    /// Visible pixels of face `face` of block `block` now, per view (face-id pass).
+    pub fn face_visible_px(&mut self, block: usize, face: usize) -> Result<[u32; 2], RenderError> {
+        self.sim.object_poses(&mut self.poses);
+        let frame = self.sim.frame_input(&self.poses);
+        let n = (self.renderer.width() * self.renderer.height()) as usize;
+        self.ids.resize(2 * n, 0);
+        self.renderer.render_ids(&frame, &mut self.ids)?;
+        let id = crate::scene::block_face_id(block, face);
+        Ok([0, 1].map(|v| self.ids[v * n..(v + 1) * n].iter().filter(|&&x| x == id).count() as u32))
+    }
+
+    /// Reads the daemon's telemetry that has arrived and judges it at frame `frame`; while an
+    /// occluder crosses the scene, renders the face-id pass to see whether it hides the target.
+    pub fn watch_daemon(&mut self, transport: &mut dyn Transport, frame: u64) -> Result<(), RunError> {
+        self.telemetry.clear();
+        transport.receive_telemetry(&mut self.telemetry)?;
+        for t in &self.telemetry {
+            self.watch.telemetry(&self.sim, frame, t);
+        }
+        let now = self.sim.now_ns();
+        let occluded = (0..self.sim.scenario.events.len()).any(|i| self.sim.events.occluder_position(i, now).is_some());
+        if occluded
+            && self.watch.wants_visibility()
+            && let Some(f) = self.watch.facet()
+        {
+            let px = self.face_visible_px(f.block, f.face)?;
+            self.watch.visibility(frame, px);
         }
         Ok(())
     }
@@ -238,6 +288,7 @@ pub fn run_lockstep(
                 commands.clear();
                 transport.receive_commands(&mut commands)?;
                 for c in &commands {
+                    runner.watch.command(meta.frame_id, c);
                     runner.sim.command(c);
                     stats.commands += 1;
                     answered |= c.frame_id == meta.frame_id;
@@ -255,6 +306,10 @@ pub fn run_lockstep(
                     break; // the daemon left while we waited
                 }
             }
+            // The daemon sends its telemetry before the command that answers the frame, so
+            // what it says about frame N is here now, and the arm is still where frame N
+            // showed it.
+            runner.watch_daemon(transport, meta.frame_id)?;
             runner.step_frame_publishing(transport, |_, _| Ok(()))?;
         }
         Ok(())
@@ -290,15 +345,22 @@ pub fn run_realtime(
                 runner.sim.command(&c);
                 received += 1;
             }
+            let mut stops = 0u32;
             runner.step_frame_publishing(transport, |sim, transport| {
                 commands.clear();
                 transport.receive_commands(&mut commands)?;
                 for c in &commands {
+                    stops += u32::from(c.kind == handeye_wire::CommandKind::Stop as u32);
                     sim.command(c);
                     received += 1;
                 }
                 Ok(())
             })?;
+            if stops > 0 {
+                let stop = RobotCommand { kind: handeye_wire::CommandKind::Stop as u32, ..RobotCommand::default() };
+                runner.watch.command(meta.frame_id, &stop);
+            }
+            runner.watch_daemon(transport, meta.frame_id)?;
             stats.commands += received;
             let now = Instant::now();
             if now > next {

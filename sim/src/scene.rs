@@ -179,12 +179,13 @@ fn arm_objects(arm: &Arm) -> Vec<SceneObject> {
         out.push(SceneObject { mesh: m, attach: body(arm.links[link]) });
     }
 
-    // Palm: dark box whose +z face is the tracked plate, a light rectangle in a dark border.
+    // Palm: dark box whose +y face (normal along the finger closing axis, towards the +y
+    // finger) is the tracked plate, a light rectangle in a dark border.
     let mut palm = Mesh::default();
     let half = DVec3::new(PALM_LENGTH_M / 2.0, PALM_HALF_WIDTH_M, PALM_HALF_THICKNESS_M);
     let centre = DVec3::X * (PALM_LENGTH_M / 2.0);
-    palm.cuboid(centre, half, [0.3, 0.3, 0.25, 0.25, 0.3, 0.2], [false, false, false, false, true, false], ID_NONE);
-    plate(&mut palm, centre + DVec3::Z * half.z, half.x, half.y);
+    palm.cuboid(centre, half, [0.3, 0.3, 0.25, 0.25, 0.3, 0.2], [false, false, true, false, false, false], ID_NONE);
+    plate(&mut palm, centre + DVec3::Y * half.y, half.x, half.z);
     out.push(SceneObject { mesh: palm, attach: body(arm.links[4]) });
 
     for (i, side) in [1.0, -1.0].into_iter().enumerate() {
@@ -206,39 +207,44 @@ fn arm_objects(arm: &Arm) -> Vec<SceneObject> {
     out
 }
 
-/// The tracked plate on a face at height `centre.z` (normal +z) with half extents `hx`, `hy`:
-/// four dark border strips around a light rectangle, all coplanar and non-overlapping.
-fn plate(m: &mut Mesh, centre: DVec3, hx: f64, hy: f64) {
+/// The tracked plate on a face at `centre.y` (normal +y, the finger closing axis) with half
+/// extents `hx` (along the tool axis) and `hz`: four dark border strips around a light
+/// rectangle, all coplanar and non-overlapping.
+fn plate(m: &mut Mesh, centre: DVec3, hx: f64, hz: f64) {
     let b = PLATE_BORDER_M;
-    let quad = |m: &mut Mesh, x0: f64, x1: f64, y0: f64, y1: f64, shade: f32, id: u32| {
-        let z = centre.z;
+    let quad = |m: &mut Mesh, x0: f64, x1: f64, z0: f64, z1: f64, shade: f32, id: u32| {
+        let y = centre.y;
+        // Counter-clockwise seen from +y: (x, z) with x then z is clockwise, so go z first.
         let pts = [
-            DVec3::new(centre.x + x0, centre.y + y0, z),
-            DVec3::new(centre.x + x1, centre.y + y0, z),
-            DVec3::new(centre.x + x1, centre.y + y1, z),
-            DVec3::new(centre.x + x0, centre.y + y1, z),
+            DVec3::new(centre.x + x0, y, centre.z + z0),
+            DVec3::new(centre.x + x0, y, centre.z + z1),
+            DVec3::new(centre.x + x1, y, centre.z + z1),
+            DVec3::new(centre.x + x1, y, centre.z + z0),
         ];
-        m.polygon(&pts, DVec3::Z, 0, shade, id);
+        m.polygon(&pts, DVec3::Y, 0, shade, id);
     };
-    quad(m, -hx, hx, -hy, -hy + b, PLATE_DARK, ID_NONE);
-    quad(m, -hx, hx, hy - b, hy, PLATE_DARK, ID_NONE);
-    quad(m, -hx, -hx + b, -hy + b, hy - b, PLATE_DARK, ID_NONE);
-    quad(m, hx - b, hx, -hy + b, hy - b, PLATE_DARK, ID_NONE);
-    quad(m, -hx + b, hx - b, -hy + b, hy - b, PLATE_LIGHT, ID_PLATE);
+    quad(m, -hx, hx, -hz, -hz + b, PLATE_DARK, ID_NONE);
+    quad(m, -hx, hx, hz - b, hz, PLATE_DARK, ID_NONE);
+    quad(m, -hx, -hx + b, -hz + b, hz - b, PLATE_DARK, ID_NONE);
+    quad(m, hx - b, hx, -hz + b, hz - b, PLATE_DARK, ID_NONE);
+    quad(m, -hx + b, hx - b, -hz + b, hz - b, PLATE_LIGHT, ID_PLATE);
 }
 
-/// The light rectangle of the plate, palm frame (corners counter-clockwise seen from the
-/// front), for ground truth.
+/// The light rectangle of the plate, palm frame (on the palm's +y face, the side of the +y
+/// finger; corners counter-clockwise seen from +y), for ground truth.
 pub fn plate_corners_in_palm() -> [DVec3; 4] {
-    let (hx, hy, b) = (PALM_LENGTH_M / 2.0, PALM_HALF_WIDTH_M, PLATE_BORDER_M);
-    let c = DVec3::new(hx, 0.0, PALM_HALF_THICKNESS_M);
+    let (hx, hz, b) = (PALM_LENGTH_M / 2.0, PALM_HALF_THICKNESS_M, PLATE_BORDER_M);
+    let c = DVec3::new(hx, PALM_HALF_WIDTH_M, 0.0);
     [
-        c + DVec3::new(-hx + b, -hy + b, 0.0),
-        c + DVec3::new(hx - b, -hy + b, 0.0),
-        c + DVec3::new(hx - b, hy - b, 0.0),
-        c + DVec3::new(-hx + b, hy - b, 0.0),
+        c + DVec3::new(-hx + b, 0.0, -hz + b),
+        c + DVec3::new(-hx + b, 0.0, hz - b),
+        c + DVec3::new(hx - b, 0.0, hz - b),
+        c + DVec3::new(hx - b, 0.0, -hz + b),
     ]
 }
+
+/// Normal of the plate in the palm frame: the finger closing axis.
+pub const PLATE_NORMAL_IN_PALM: DVec3 = DVec3::Y;
 
 /// An affine transform from a rotation and a translation.
 pub fn affine(rot: DMat3, pos: DVec3) -> DAffine3 {

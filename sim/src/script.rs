@@ -65,14 +65,19 @@ impl GroundTruthPick {
         // Fingers close along the tool y axis, (-sin yaw, cos yaw): yaw = block yaw closes
         // them along the block's y; +90° along its x.
         let across_x = matches!(b.shape.kind, BlockKind::Cube | BlockKind::Bar) && size.x < size.y;
-        let mut yaw = block_yaw + if across_x { std::f64::consts::FRAC_PI_2 } else { 0.0 };
-        // The jaws are symmetric: pick the equivalent yaw nearest 0 (plate facing the cameras).
-        yaw = wrap_angle(yaw);
-        if yaw > std::f64::consts::FRAC_PI_2 {
-            yaw -= std::f64::consts::PI;
-        } else if yaw < -std::f64::consts::FRAC_PI_2 {
-            yaw += std::f64::consts::PI;
-        }
+        let yaw = block_yaw + if across_x { std::f64::consts::FRAC_PI_2 } else { 0.0 };
+        // The jaws are symmetric (yaw + 180° grasps the same faces) and a square footprint
+        // can be grasped across either pair of sides (yaw + 90°): pick the equivalent yaw
+        // nearest -90°, where the plate (on the palm's side, normal along the closing axis)
+        // faces +x, the cameras of the shipped scenarios, and the wrist roll is mid-range.
+        let square = (size.x - size.y).abs() < 1e-3 && matches!(b.shape.kind, BlockKind::Cube | BlockKind::Bar);
+        let turns: &[f64] = if square { &[0.0, 0.5, 1.0, 1.5] } else { &[0.0, 1.0] };
+        let target = -std::f64::consts::FRAC_PI_2;
+        let yaw = turns
+            .iter()
+            .map(|k| target + wrap_angle(yaw + k * std::f64::consts::PI - target))
+            .min_by(|a, b| (a - target).abs().total_cmp(&(b - target).abs()))
+            .unwrap_or(yaw);
         Self {
             block,
             phase: Phase::Approach,

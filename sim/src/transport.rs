@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
 use handeye_wire::stereo::{Delivery, StereoGeometry, StereoPublisher, StereoPublisherOptions};
-use handeye_wire::{Domain, RobotCommand, RobotState, WireNode, monotonic_ns};
+use handeye_wire::{Domain, RobotCommand, RobotState, Telemetry, WireNode, monotonic_ns};
 
 use crate::render::RenderError;
 use crate::run::{FrameMeta, RunError, Transport};
@@ -30,6 +30,8 @@ pub struct WireTransport {
     frames: StereoPublisher,
     state: MessagePublisher<RobotState>,
     commands: MessageSubscriber<RobotCommand>,
+    /// The daemon's telemetry, read only to judge it against ground truth.
+    telemetry: MessageSubscriber<Telemetry>,
     /// Commands taken out of the subscriber while waiting, not yet handed over.
     pending: VecDeque<RobotCommand>,
     node: WireNode,
@@ -46,7 +48,31 @@ impl WireTransport {
         let frames = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery: Delivery::Latest, ..Default::default() })?;
         let state = MessagePublisher::<RobotState>::create(&node)?;
         let commands = MessageSubscriber::<RobotCommand>::create(&node)?;
-        Ok(Self { frames, state, commands, pending: VecDeque::new(), node, geometry })
+        let telemetry = MessageSubscriber::<Telemetry>::create(&node)?;
+        Ok(Self { frames, state, commands, telemetry, pending: VecDeque::new(), node, geometry })
+    }
+
+    /// Waits up to `timeout` for a command publisher (a daemon) to attach, so that a lockstep
+    /// run's first frame is not stepped past before the daemon is there. `true` if one did.
+    pub fn wait_for_daemon(&mut self, timeout: Duration) -> Result<bool, RunError> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            if self.daemon_attached() {
+                return Ok(true);
+            }
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                return Ok(false);
+            }
+            if self.node.termination_requested() {
+                return Err(RunError::Interrupted);
+            }
+            match self.commands.wait((deadline - now).min(Duration::from_millis(20))).map_err(|e| RunError::Transport(e.to_string()))? {
+                MessageEvent::Message(m) => self.pending.push_back(m),
+                MessageEvent::Interrupted => return Err(RunError::Interrupted),
+                _ => {}
+            }
+        }
     }
 
     /// The domain joined.
@@ -127,5 +153,12 @@ impl Transport for WireTransport {
 
     fn interrupted(&self) -> bool {
         self.node.termination_requested()
+    }
+
+    fn receive_telemetry(&mut self, out: &mut Vec<Telemetry>) -> Result<(), RunError> {
+        while let Some(t) = self.telemetry.try_receive() {
+            out.push(t);
+        }
+        Ok(())
     }
 }

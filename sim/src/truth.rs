@@ -205,7 +205,7 @@ impl GroundTruth {
         let reading = sim.arm_reading();
         let (palm_pos, palm_rot) = sim.world.body_pose(sim.world.arm.links[4]);
         let plate = plate_corners_in_palm().map(|c| palm_pos + palm_rot * c);
-        let plate_normal = palm_rot * DVec3::Z;
+        let plate_normal = palm_rot * crate::scene::PLATE_NORMAL_IN_PALM;
         let gripper = GripperTruth {
             tool_m: arr(reading.tool_m),
             yaw_deg: reading.yaw_rad().to_degrees(),

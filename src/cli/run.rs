@@ -1,9 +1,359 @@
-use anyhow::{bail, Result};
+//! `handeye run`: one closed-loop scenario as two processes (simulator and daemon) in a
+//! private shared-memory domain, merged into one verdict.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
 use clap::Args;
+use handeye_daemon::DaemonConfig;
+use handeye_sim::Scenario;
+use handeye_wire::Domain;
+use serde_json::{json, Value};
 
+/// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
+/// as two child processes in a private domain, talking only over shared memory.
+///
+/// The simulator writes the operator hint (the target facet in both views, ±3 px per corner,
+/// and its depth ±2 mm) before its first frame and judges the run from ground truth: success
+/// (the target lifted 50 mm and held 2 s), and, at the moment the daemon's telemetry says the
+/// servo converged, final_plane_error_mm (distance of the gripper plate's centre from the
+/// target facet's plane: the servo makes them coplanar) and final_angle_error_deg (angle
+/// between the plate's normal, the jaws' closing axis, and the facet's normal). The daemon
+/// gets the frames, the robot state, the hint and its configuration (the scenario's cage);
+/// never ground truth.
+///
+/// Prints a summary, or with --json one object: success, phase_reached, failure_reason,
+/// servo_steps, final_plane_error_mm, final_angle_error_deg, grasp_plane_error_mm (jaw-centre
+/// plane from the block's mid-plane when the jaws closed), loop_us_p50, loop_us_p99,
+/// deadline_misses, calibration_residual_px, sim_frames, wall_s, seed, report (folder or null).
+///
+/// The children are always cleaned up: on Ctrl-C, on failure, and after --timeout-s (a hung
+/// child is killed). Their stderr is kept in the report folder (sim.stderr.log,
+/// daemon.stderr.log). Exit status 0 on success, 2 when the run failed.
+///
+/// Examples:
+///   handeye run scenarios/pick_cube.toml
+///   handeye run scenarios/pick_cube.toml --seed 7 --json
+///   handeye run scenarios/pick_cube_bump.toml --out out/bump
 #[derive(Args)]
-pub struct RunArgs {}
+pub struct RunArgs {
+    /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
+    scenario: PathBuf,
+    /// Print one JSON object (see above) instead of the summary.
+    #[arg(long)]
+    json: bool,
+    /// Report folder: overlay PNGs of both views at key moments with the trackers drawn,
+    /// servo_error.png, daemon.json, sim.json, run.json, hint.json, daemon.toml, and both
+    /// children's stderr. Without it, everything goes to a temporary folder that is removed.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Shared-memory domain for the two processes (default: a fresh private one).
+    #[arg(long, value_name = "NAME")]
+    domain: Option<Domain>,
+    /// Seed: randomises the target block's pose (±20 mm, ±15°), the sensor noise and the
+    /// hint's errors. Default: the scenario as written.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Daemon configuration (TOML) to start from; the scenario's cage replaces its
+    /// calibration.cage_m.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Kill both children after this many seconds of wall time.
+    #[arg(long, default_value_t = 300.0, value_name = "S")]
+    timeout_s: f64,
+}
 
-pub fn run(_args: RunArgs) -> Result<()> {
-    bail!("'handeye run' is not built yet (issue #5)")
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
+/// A child that is killed (SIGTERM, then SIGKILL) when dropped, unless it has exited.
+struct Guarded {
+    name: &'static str,
+    child: Option<Child>,
+    status: Option<std::process::ExitStatus>,
+}
+
+impl Guarded {
+    fn poll(&mut self) -> Option<std::process::ExitStatus> {
+        if self.status.is_none()
+            && let Some(c) = self.child.as_mut()
+            && let Ok(Some(s)) = c.try_wait()
+        {
+            self.status = Some(s);
+        }
+        self.status
+    }
+
+    /// Asks the child to finish (SIGTERM: both children stop cleanly and write their
+    /// results), then kills it if it is still there after `grace`.
+    fn stop(&mut self, grace: Duration) {
+        if self.poll().is_some() {
+            return;
+        }
+        let Some(pid) = self.child.as_ref().map(|c| c.id()) else { return };
+        // SAFETY: kill(2) on our own child's pid, which has not been reaped yet.
+        unsafe { libc::kill(pid as libc::pid_t, libc::SIGTERM) };
+        let until = Instant::now() + grace;
+        while Instant::now() < until {
+            if self.poll().is_some() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if let Some(c) = self.child.as_mut() {
+            eprintln!("run: {} did not stop in {:.1} s; killing it", self.name, grace.as_secs_f64());
+            let _ = c.kill();
+            self.status = c.wait().ok();
+        }
+    }
+}
+
+impl Drop for Guarded {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(2));
+    }
+}
+
+fn spawn(name: &'static str, args: &[String], dir: &Path) -> Result<Guarded> {
+    let exe = std::env::current_exe().context("finding the handeye executable")?;
+    let stderr = std::fs::File::create(dir.join(format!("{name}.stderr.log")))?;
+    let stdout = std::fs::File::create(dir.join(format!("{name}.stdout.log")))?;
+    let child = Command::new(exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(stdout)
+        .stderr(stderr)
+        .spawn()
+        .with_context(|| format!("starting the {name}"))?;
+    Ok(Guarded { name, child: Some(child), status: None })
+}
+
+fn tail(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    lines[lines.len().saturating_sub(5)..].join("\n")
+}
+
+fn read_json(path: &Path) -> Option<Value> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+pub fn run(args: RunArgs) -> Result<()> {
+    let scenario = Scenario::load(&args.scenario)?;
+    let start = Instant::now();
+    // SAFETY: installs an async-signal-safe handler that only stores to an atomic.
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+    }
+    let temp = args.out.is_none();
+    let dir = args.out.clone().unwrap_or_else(|| std::env::temp_dir().join(format!("handeye-run-{}", std::process::id())));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    for stale in ["hint.json", "sim.json", "daemon.json", "run.json"] {
+        let _ = std::fs::remove_file(dir.join(stale));
+    }
+    let result = run_in(&args, &scenario, &dir, start);
+    if temp {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let (summary, ok) = result?;
+    if args.json {
+        println!("{summary}");
+    } else {
+        print_summary(&summary);
+    }
+    if !ok {
+        std::process::exit(2);
+    }
+    Ok(())
+}
+
+fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Result<(Value, bool)> {
+    let mut config = match &args.config {
+        Some(p) => DaemonConfig::load(p)?,
+        None => DaemonConfig::default(),
+    };
+    config.calibration.cage_m = scenario.cage.points_m.clone();
+    config.frame_rate_hz = f64::from(scenario.render.frame_rate_hz);
+    // Lockstep: the simulator renders frame N+1 only after the daemon answered frame N, so a
+    // slow render on a loaded machine is not a stale camera. A simulator that is gone is still
+    // noticed within ~100 ms by the stream's liveness check.
+    config.stale_frame_ms = config.stale_frame_ms.max(2000);
+    config.validate(&dir.join("daemon.toml"))?;
+    std::fs::write(dir.join("daemon.toml"), config.to_toml())?;
+    let domain = args.domain.clone().unwrap_or_else(|| Domain::unique("run"));
+    let s = |p: &Path| p.display().to_string();
+    let mut sim_args = vec![
+        "sim".to_string(),
+        s(&args.scenario),
+        "--lockstep".into(),
+        "--domain".into(),
+        domain.to_string(),
+        "--hint-out".into(),
+        s(&dir.join("hint.json")),
+        "--verdict-out".into(),
+        s(&dir.join("sim.json")),
+        "--wait-daemon-ms".into(),
+        "60000".into(),
+        "--json".into(),
+    ];
+    if let Some(seed) = args.seed {
+        sim_args.extend(["--seed".into(), seed.to_string()]);
+    }
+    let mut sim = spawn("sim", &sim_args, dir)?;
+    let deadline = start + Duration::from_secs_f64(args.timeout_s);
+    // The hint appears once the simulator has built the scene (before its first frame).
+    while !dir.join("hint.json").exists() {
+        if sim.poll().is_some() {
+            bail!("the simulator exited before writing the hint:\n{}", tail(&dir.join("sim.stderr.log")));
+        }
+        if INTERRUPTED.load(Ordering::SeqCst) || Instant::now() > deadline {
+            bail!("interrupted before the simulator was ready");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let daemon_args = vec![
+        "daemon".to_string(),
+        "--domain".into(),
+        domain.to_string(),
+        "--config".into(),
+        s(&dir.join("daemon.toml")),
+        "--hint".into(),
+        s(&dir.join("hint.json")),
+        "--out".into(),
+        s(dir),
+        "--json".into(),
+    ];
+    let mut daemon = spawn("daemon", &daemon_args, dir)?;
+    let mut note = None;
+    loop {
+        let (d, m) = (daemon.poll(), sim.poll());
+        if d.is_some() && m.is_some() {
+            break;
+        }
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            note = Some("interrupted".to_string());
+            break;
+        }
+        if Instant::now() > deadline {
+            note = Some(format!("timed out after {:.0} s of wall time", args.timeout_s));
+            break;
+        }
+        if let Some(status) = d {
+            // The simulator stops by itself on success; otherwise it would step on alone
+            // until its time-out, so it is stopped at once when the daemon did not succeed.
+            let wait = if status.success() { Duration::from_secs(10) } else { Duration::ZERO };
+            let grace = Instant::now() + wait;
+            while sim.poll().is_none() && Instant::now() < grace {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            break;
+        }
+        if m.is_some() {
+            // The daemon notices the camera stream is gone within a few hundred ms.
+            let grace = Instant::now() + Duration::from_secs(5);
+            while daemon.poll().is_none() && Instant::now() < grace {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    daemon.stop(Duration::from_secs(3));
+    sim.stop(Duration::from_secs(5));
+    let wall_s = start.elapsed().as_secs_f64();
+    if args.domain.is_none() {
+        // A private domain: nobody else uses its files.
+        let _ = handeye_wire::domain::remove_domain_files(&domain);
+    }
+    let d = read_json(&dir.join("daemon.json"));
+    let v = read_json(&dir.join("sim.json"));
+    if d.is_none() && v.is_none() {
+        bail!(
+            "neither child reported{}:\nsim: {}\ndaemon: {}",
+            note.map(|n| format!(" ({n})")).unwrap_or_default(),
+            tail(&dir.join("sim.stderr.log")),
+            tail(&dir.join("daemon.stderr.log"))
+        );
+    }
+    let d = d.unwrap_or(Value::Null);
+    let v = v.unwrap_or(Value::Null);
+    let success = v["success"].as_bool().unwrap_or(false);
+    let failure_reason = if success {
+        Value::Null
+    } else if let Some(r) = d["failure_reason"].as_str() {
+        json!(r)
+    } else if let Some(n) = &note {
+        json!(n)
+    } else if v["verdict"] == json!("timed_out") {
+        json!("the scenario timed out before the target was lifted and held")
+    } else if d.is_null() {
+        json!(format!("the daemon reported nothing: {}", tail(&dir.join("daemon.stderr.log"))))
+    } else {
+        json!("the target was not lifted and held (ground truth)")
+    };
+    let conv = &v["daemon"]["converged"];
+    let grasped = &v["daemon"]["grasped"];
+    let summary = json!({
+        "scenario": scenario.name,
+        "success": success,
+        "phase_reached": d["phase_reached"],
+        "final_phase": d["final_phase"],
+        "failure_reason": failure_reason,
+        "servo_steps": d["servo_steps"],
+        "final_plane_error_mm": conv["final_plane_error_mm"],
+        "final_angle_error_deg": conv["final_angle_error_deg"],
+        "grasp_plane_error_mm": grasped["jaw_plane_offset_mm"].as_f64().map(f64::abs),
+        "grasp_lateral_error_mm": grasped["lateral_error_mm"],
+        "loop_us_p50": d["loop_us_p50"],
+        "loop_us_p99": d["loop_us_p99"],
+        "loop_us_max": d["loop_us_max"],
+        "deadline_misses": d["deadline_misses"],
+        "calibration_residual_px": d["calibration"]["residual_rms_px"],
+        "max_lift_mm": v["max_lift_mm"],
+        "sim_frames": v["frames"],
+        "sim_time_s": v["sim_time_s"],
+        "wall_s": wall_s,
+        "seed": v["seed"],
+        "domain": domain.to_string(),
+        "report": if args.out.is_some() { json!(dir.display().to_string()) } else { Value::Null },
+    });
+    std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
+    Ok((summary, success))
+}
+
+fn print_summary(s: &Value) {
+    let num = |k: &str, unit: &str| s[k].as_f64().map_or("n/a".to_string(), |x| format!("{x:.2}{unit}"));
+    println!(
+        "{}: {} (phase reached: {}){}",
+        s["scenario"].as_str().unwrap_or("?"),
+        if s["success"].as_bool() == Some(true) { "SUCCESS" } else { "FAILED" },
+        s["phase_reached"].as_str().unwrap_or("?"),
+        s["failure_reason"].as_str().map(|r| format!(": {r}")).unwrap_or_default()
+    );
+    println!(
+        "  servo: {} steps; at convergence plate {} off the facet plane, {} off parallel; jaws {} off the block's mid-plane",
+        s["servo_steps"],
+        num("final_plane_error_mm", " mm"),
+        num("final_angle_error_deg", "°"),
+        num("grasp_plane_error_mm", " mm")
+    );
+    println!(
+        "  loop: p50 {}, p99 {}, {} deadline misses; calibration residual {}; {} frames, {}",
+        num("loop_us_p50", " µs"),
+        num("loop_us_p99", " µs"),
+        s["deadline_misses"],
+        num("calibration_residual_px", " px"),
+        s["sim_frames"],
+        num("wall_s", " s wall")
+    );
+    if let Some(r) = s["report"].as_str() {
+        println!("  report: {r}");
+    }
 }

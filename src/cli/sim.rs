@@ -53,9 +53,28 @@ pub struct SimArgs {
     #[arg(long)]
     scripted_pick: bool,
     /// Print one JSON object at the end: frames, fps, frames_hash (a hash over every
-    /// published pixel, hex), commands, reply_timeouts, verdict, and more.
+    /// published pixel, hex), commands, reply_timeouts, verdict, daemon (what the daemon's
+    /// telemetry claimed, judged from ground truth: phases, converged placement with
+    /// final_plane_error_mm and final_angle_error_deg, stop frame), and more.
     #[arg(long)]
     json: bool,
+    /// Use this seed for every random choice (noise, hint errors) and move the target block
+    /// by a seeded random shift (±20 mm in x and y) and turn (±15°). Default: the scenario's
+    /// seed and block poses as written.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Write the operator hint for the target (its best graspable facet in both views, each
+    /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
+    /// before the first frame, for `handeye daemon --hint`.
+    #[arg(long, value_name = "FILE")]
+    hint_out: Option<PathBuf>,
+    /// Lockstep: before the first frame, wait up to this many milliseconds for a daemon
+    /// (a command publisher) to attach. 0 = do not wait.
+    #[arg(long, default_value_t = 0, value_name = "MS")]
+    wait_daemon_ms: u64,
+    /// Also write the JSON object of --json to this file (the verdict `handeye run` merges).
+    #[arg(long, value_name = "FILE")]
+    verdict_out: Option<PathBuf>,
     #[command(flatten)]
     domain: DomainArgs,
 }
@@ -82,7 +101,10 @@ pub fn quiet_mesa() {
 
 pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
-    let scenario = Scenario::load(&args.scenario)?;
+    let mut scenario = Scenario::load(&args.scenario)?;
+    if let Some(seed) = args.seed {
+        scenario.randomise_target(seed);
+    }
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
     let adapter = runner.renderer.adapter();
@@ -94,8 +116,24 @@ pub fn run(args: SimArgs) -> Result<()> {
         reply_timeout: Duration::from_millis(args.reply_timeout_ms),
         stop_on_success: !args.no_stop_on_success,
     };
+    if let Some(path) = &args.hint_out {
+        let (hint, facet) = handeye_sim::hint::operator_hint(&runner.sim, runner.sim.scenario.seed)?;
+        let text = serde_json::to_string_pretty(&hint)?;
+        // Write then rename, so a reader never sees half a file.
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
+        std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
+        runner.watch.set_facet(facet);
+        if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
+            let px = runner.face_visible_px(facet.block, facet.face)?;
+            runner.watch.set_facet_baseline(px);
+        }
+    }
     let (w, h) = (runner.renderer.width(), runner.renderer.height());
     let mut transport = WireTransport::new(&args.domain.domain, w, h)?;
+    if args.lockstep && args.wait_daemon_ms > 0 && !transport.wait_for_daemon(Duration::from_millis(args.wait_daemon_ms))? {
+        anyhow::bail!("no daemon attached to domain '{}' within {} ms", transport.domain(), args.wait_daemon_ms);
+    }
     if !args.json {
         eprintln!(
             "sim: {name} on handeye/stereo + handeye/robot/* in domain '{}' ({}, 2 x {w}x{h} GRAY8 at {} frames/s of simulated time)",
@@ -121,7 +159,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         Verdict::Success { at_ns } => format!("success at {:.2} s", at_ns as f64 * 1e-9),
         Verdict::TimedOut => "timed out".to_string(),
     };
-    if args.json {
+    let report = args.json || args.verdict_out.is_some();
+    if report {
         let out = serde_json::json!({
             "scenario": name,
             "mode": if args.lockstep { "lockstep" } else { "realtime" },
@@ -139,9 +178,18 @@ pub fn run(args: SimArgs) -> Result<()> {
             "adapter": adapter,
             "domain": transport.domain().to_string(),
             "commands_rejected": transport.command_stats().rejected_total(),
+            "success": matches!(verdict, Verdict::Success { .. }),
+            "seed": runner.sim.scenario.seed,
+            "daemon": &runner.watch,
         });
-        println!("{out}");
-    } else {
+        if let Some(path) = &args.verdict_out {
+            std::fs::write(path, serde_json::to_string_pretty(&out)?).with_context(|| format!("writing {}", path.display()))?;
+        }
+        if args.json {
+            println!("{out}");
+        }
+    }
+    if !args.json {
         println!(
             "{name}: {} frames in {:.2} s ({:.1} fps), {:.2} s simulated; verdict: {verdict_text}; frames hash {:016x}",
             stats.frames,

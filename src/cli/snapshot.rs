@@ -53,7 +53,8 @@ pub fn run(args: SnapshotArgs) -> Result<()> {
         }
         sim.step_frame();
     }
-    let mut renderer = Renderer::for_scene(&sim.scene, &sim.events.cameras).context("starting the renderer")?;
+    let mut renderer =
+        Renderer::for_scene_with(&sim.scene, &sim.events.cameras, sim.scenario.render.antialias).context("starting the renderer")?;
     eprintln!("renderer: {}", renderer.adapter());
     let (w, h) = (renderer.width(), renderer.height());
     let mut poses = Vec::new();

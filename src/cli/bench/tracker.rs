@@ -52,9 +52,16 @@ pub struct TrackerArgs {
     repeats: usize,
 
     /// Skip a contour's refinement pass when its first pass moved no corner this far, px
-    /// (0 = always refine, the default). About a quarter faster, slightly less accurate.
+    /// (0 = always refine, the default). About a quarter faster, but markedly less robust on
+    /// real frames (see `TrackerConfig::refine_skip_px`): for measuring the trade-off only.
     #[arg(long, value_name = "PX", default_value_t = 0.0)]
     refine_skip_px: f64,
+
+    /// Search passes per update (1..=8; default 2: a ±10 px search, then a ±4 px refinement).
+    /// 1 costs about 60 % of 2 but loses the real top face far more often (see
+    /// `TrackerConfig::passes`): for measuring the trade-off only.
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    passes: usize,
 
     /// Print one JSON object: contour_update_us_p50, contour_update_us_p99,
     /// stereo_update_us_p50, stereo_update_us_p99, stereo_hz and the run's details (the
@@ -76,8 +83,8 @@ pub fn run(args: TrackerArgs) -> Result<()> {
         bail!("{} holds {} frames; the benchmark needs at least 3", args.dir.display(), paths.len());
     }
     let frames: Vec<ImageBuf> = paths.iter().map(|p| load_gray(p)).collect::<Result<_>>()?;
-    let config = TrackerConfig { refine_skip_px: args.refine_skip_px, ..TrackerConfig::default() };
-    config.validate().context("bad --refine-skip-px")?;
+    let config = TrackerConfig { refine_skip_px: args.refine_skip_px, passes: args.passes, ..TrackerConfig::default() };
+    config.validate().context("bad --refine-skip-px or --passes")?;
     let dt_s = 1.0 / 30.0;
 
     // One contour through the sequence.

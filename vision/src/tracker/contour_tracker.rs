@@ -7,7 +7,7 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_point, Candidate, PointEdges, SideGeometry};
+use super::search::{search_side, Appearance, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -85,6 +85,8 @@ pub struct ContourTracker {
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
     fit: FitBuffers,
+    /// Working space of the search of one side.
+    line: SideScratch,
 }
 
 impl ContourTracker {
@@ -138,6 +140,7 @@ impl ContourTracker {
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
+            line: SideScratch::with_capacity(n),
         };
         tracker.restart(frame);
         tracker
@@ -206,7 +209,7 @@ impl ContourTracker {
                 deformation_ridge: self.config.deformation_ridge,
                 perspective_ridge: self.config.perspective_ridge,
             };
-            let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides, edges: &self.edges };
+            let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides };
             let fit = fit_motion(&points, &settings, &mut self.fit);
             let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
                 self.state = TrackState::Lost(LostReason::NotFinite);
@@ -226,6 +229,8 @@ impl ContourTracker {
                 break;
             }
         }
+        // Per-point choices and residuals of the last pass, for the checks and the learning.
+        self.fit.finish();
         let verdict = self.judge(&current);
         self.state = match verdict {
             Some(reason) => TrackState::Lost(reason),
@@ -250,11 +255,7 @@ impl ContourTracker {
         let orient = self.template.orientation * frame.det().signum();
         self.sides.clear();
         self.fit_sides.clear();
-        let fixed_sign = match self.config.edge_sign {
-            EdgeSign::Either => Some(0),
-            EdgeSign::Fixed(p) => Some(p.outward_sign()),
-            EdgeSign::Learned => None,
-        };
+        let min_contrast = self.config.min_contrast;
         for edge in &self.template.edges {
             // A side stays straight under the placement; its image direction is that of its
             // end points (the tangent pushed through the map's derivative in the affine case).
@@ -270,46 +271,48 @@ impl ContourTracker {
             let side = SideGeometry::new(normal, search_px);
             self.sides.push(side);
             let start = placement.image_from_template(edge.start) - frame.origin;
-            self.fit_sides.push(FitSide {
-                first: edge.first,
-                count: edge.count,
-                normal: Vector2::new(normal[0], normal[1]),
-                np: normal[0] * start.x + normal[1] * start.y,
-            });
+            let np = normal[0] * start.x + normal[1] * start.y;
+            self.fit_sides.push(FitSide { first: edge.first, count: edge.count, normal: Vector2::new(normal[0], normal[1]), np });
             let affine = placement.perspective == Vector2::zeros();
             let first = frame.image_from_template(edge.start);
             let step = frame.e1 * edge.step.x + frame.e2 * edge.step.y;
-            for k in 0..edge.count {
-                let i = edge.first + k;
+            let range = edge.first..edge.first + edge.count;
+            // The side's points...
+            let points = self.pos_x[range.clone()]
+                .iter_mut()
+                .zip(&mut self.pos_y[range.clone()])
+                .zip(self.rel_x[range.clone()].iter_mut().zip(&mut self.rel_y[range.clone()]));
+            for (k, ((pos_x, pos_y), (rel_x, rel_y))) in points.enumerate() {
                 let p = if affine {
                     first + step * k as f64
                 } else {
                     placement.image_from_template(edge.start + edge.step * k as f64)
                 };
-                self.pos_x[i] = p.x;
-                self.pos_y[i] = p.y;
-                self.rel_x[i] = p.x - frame.origin.x;
-                self.rel_y[i] = p.y - frame.origin.y;
-                self.nrm_x[i] = normal[0];
-                self.nrm_y[i] = normal[1];
-                let sign = match fixed_sign {
-                    Some(s) => s,
-                    None => {
-                        let r = self.ref_contrast[i];
-                        if r.abs() >= self.config.min_contrast as f32 { r.signum() as i32 } else { 0 }
-                    }
-                };
-                search_point(image, &side, p.x, p.y, search_px, sign, self.config.min_contrast, &mut self.edges[i]);
-                let reference = self.ref_inside[i];
-                if self.config.appearance_px_per_grey > 0.0 && reference >= 0.0 {
-                    let gain = self.config.appearance_px_per_grey as f32;
-                    let tolerance = self.config.appearance_tolerance as f32;
-                    let e = &mut self.edges[i];
-                    for c in &mut e.candidates[..e.count as usize] {
-                        c.penalty_px = gain * ((c.inside as f32 - reference).abs() - tolerance).max(0.0);
-                    }
-                }
+                (*pos_x, *pos_y) = (p.x, p.y);
+                (*rel_x, *rel_y) = (p.x - frame.origin.x, p.y - frame.origin.y);
             }
+            // ...their searches (with the appearance cue)...
+            let signs = match self.config.edge_sign {
+                EdgeSign::Either => SignRule::Fixed(0),
+                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
+                EdgeSign::Learned => {
+                    SignRule::Learned { reference: &self.ref_contrast[range.clone()], min_contrast: min_contrast as f32 }
+                }
+            };
+            let appearance = Appearance {
+                reference: &self.ref_inside[range.clone()],
+                gain: self.config.appearance_px_per_grey as f32,
+                tolerance: self.config.appearance_tolerance as f32,
+            };
+            let (xs, ys) = (&self.pos_x[range.clone()], &self.pos_y[range.clone()]);
+            let found = &mut self.edges[range.clone()];
+            search_side(image, &side, xs, ys, search_px, signs, appearance, min_contrast, &mut self.line, found);
+            // ...and the fit's copy.
+            self.nrm_x[range.clone()].fill(normal[0]);
+            self.nrm_y[range.clone()].fill(normal[1]);
+            let geometry = (normal[0] as f32, normal[1] as f32, np as f32);
+            self.fit.set_side(edge.first, &self.rel_x[range.clone()], &self.rel_y[range.clone()], geometry);
+            self.fit.set_side_candidates(edge.first, &self.edges[range]);
         }
     }
 

@@ -10,7 +10,8 @@
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
-use super::search::{PointEdges, MAX_CANDIDATES};
+use super::search::{Candidate, PointEdges, MAX_CANDIDATES};
+use super::simd::F32x4;
 
 /// Which least-squares problem estimates the shape change (Appendix A).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -71,84 +72,196 @@ pub(crate) struct FitResult {
 }
 
 /// Per-point data the fit writes, and its working copies; all sized at construction.
+///
+/// The working copies are f32, one array per quantity so the loops run four or eight points
+/// at a time ([`F32x4`], or AVX where the processor has it), padded to whole groups of
+/// [`LANES`] with points that have no candidate. The
+/// tracker fills them as it searches ([`set_point`](Self::set_point),
+/// [`set_candidates`](Self::set_candidates)); nothing is copied between search and fit.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct FitBuffers {
-    /// Chosen candidate index per point, -1 for none.
+    /// Chosen candidate index per point, -1 for none (after [`finish`](Self::finish)).
     pub chosen: Vec<i8>,
     /// Residual of the chosen candidate after the fit, px (0 for none).
     pub residual: Vec<f64>,
     /// Final robust weight (0 for none).
     pub weight: Vec<f64>,
-    // Working copies in f32, one array per quantity so the loops vectorise: position,
-    // normal and c = n·p of each point's side, the candidates' offsets and penalties
-    // (+∞ for an empty slot), and per iteration the chosen offset, residual and weight.
+    /// Points, and lanes (points rounded up to a multiple of 4).
+    n: usize,
+    lanes: usize,
+    // Position relative to the centre, normal and c = n·p of the point's side.
     x: Vec<f32>,
     y: Vec<f32>,
     nx: Vec<f32>,
     ny: Vec<f32>,
     c: Vec<f32>,
-    /// Slot-major: slot k of point i at `k * n + i`, so four neighbouring points of one slot
-    /// load together.
+    /// Candidates' offsets and penalties, slot-major (slot k of point i at `k * lanes + i`, so
+    /// four neighbouring points of one slot load together); +∞ penalty for an empty slot.
     cand_h: Vec<f32>,
     cand_pen: Vec<f32>,
+    /// Per iteration: the chosen offset, its residual, whether there was one (a lane mask),
+    /// and the robust weight.
     h: Vec<f32>,
     r: Vec<f32>,
+    valid: Vec<f32>,
     w: Vec<f32>,
+    /// The last fit's motion, robust scale and loss, for [`finish`](Self::finish).
+    last: Option<(Vec8, f64, RobustLoss)>,
+    /// The residual histogram, kept here: clearing all of it per fit would cost more than
+    /// the counting.
+    bins: ResidualBins,
+    /// The processor has AVX2: the association runs eight points at a time.
+    avx2: bool,
 }
 
 impl FitBuffers {
     pub fn with_capacity(n: usize) -> Self {
+        let lanes = n.div_ceil(LANES) * LANES;
         Self {
             chosen: Vec::with_capacity(n),
             residual: Vec::with_capacity(n),
             weight: Vec::with_capacity(n),
-            x: Vec::with_capacity(n),
-            y: Vec::with_capacity(n),
-            nx: Vec::with_capacity(n),
-            ny: Vec::with_capacity(n),
-            c: Vec::with_capacity(n),
-            cand_h: Vec::with_capacity(n * MAX_CANDIDATES),
-            cand_pen: Vec::with_capacity(n * MAX_CANDIDATES),
-            h: Vec::with_capacity(n),
-            r: Vec::with_capacity(n),
-            w: Vec::with_capacity(n),
+            n: 0,
+            lanes: 0,
+            x: Vec::with_capacity(lanes),
+            y: Vec::with_capacity(lanes),
+            nx: Vec::with_capacity(lanes),
+            ny: Vec::with_capacity(lanes),
+            c: Vec::with_capacity(lanes),
+            cand_h: Vec::with_capacity(lanes * MAX_CANDIDATES),
+            cand_pen: Vec::with_capacity(lanes * MAX_CANDIDATES),
+            h: Vec::with_capacity(lanes),
+            r: Vec::with_capacity(lanes),
+            valid: Vec::with_capacity(lanes),
+            w: Vec::with_capacity(lanes),
+            last: None,
+            bins: ResidualBins::default(),
+            avx2: has_avx2(),
         }
     }
 
-    /// Sets the length to `n` (no allocation within capacity).
+    /// Sets the number of points to `n` (no allocation within capacity). The padding lanes
+    /// get no candidate; the points' own data is left for the caller to set.
     pub fn resize(&mut self, n: usize) {
+        let lanes = n.div_ceil(LANES) * LANES;
         self.chosen.resize(n, -1);
         self.residual.resize(n, 0.0);
         self.weight.resize(n, 0.0);
-        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.w] {
-            v.resize(n, 0.0);
+        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.valid, &mut self.w] {
+            v.resize(lanes, 0.0);
         }
-        self.cand_h.resize(n * MAX_CANDIDATES, 0.0);
-        self.cand_pen.resize(n * MAX_CANDIDATES, f32::INFINITY);
+        self.cand_h.resize(lanes * MAX_CANDIDATES, 0.0);
+        self.cand_pen.resize(lanes * MAX_CANDIDATES, f32::INFINITY);
+        (self.n, self.lanes) = (n, lanes);
+        for i in n..lanes {
+            self.set_point(i, 0.0, 0.0, 0.0, 0.0, 0.0);
+            self.set_candidates(i, &[]);
+        }
+        self.last = None;
     }
 
-    /// Fills the working copies from the pass's points.
-    fn prepare(&mut self, points: &FitPoints<'_>) {
+    /// Asserts the layout the four-lane loops rely on to read without bounds checks: every
+    /// working array holds `lanes` values (per candidate slot), a multiple of 4.
+    #[inline]
+    fn check_lanes(&self) {
+        let l = self.lanes;
+        assert!(
+            l.is_multiple_of(LANES)
+                && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w]
+                    .iter()
+                    .all(|v| v.len() == l)
+                && self.cand_h.len() == l * MAX_CANDIDATES
+                && self.cand_pen.len() == l * MAX_CANDIDATES,
+            "fit buffers out of shape"
+        );
+    }
+
+    /// Point `i`'s position relative to the fit's centre, its side's normal and `c = n·p`.
+    #[inline]
+    pub fn set_point(&mut self, i: usize, x: f32, y: f32, nx: f32, ny: f32, c: f32) {
+        self.x[i] = x;
+        self.y[i] = y;
+        self.nx[i] = nx;
+        self.ny[i] = ny;
+        self.c[i] = c;
+    }
+
+    /// The points `first..first + x.len()` of one side: positions relative to the fit's
+    /// centre, and the side's normal and `c = n·p` as `(n.x, n.y, c)`.
+    pub fn set_side(&mut self, first: usize, x: &[f64], y: &[f64], (nx, ny, c): (f32, f32, f32)) {
+        let range = first..first + x.len();
+        for (d, s) in self.x[range.clone()].iter_mut().zip(x) {
+            *d = *s as f32;
+        }
+        for (d, s) in self.y[range.clone()].iter_mut().zip(y) {
+            *d = *s as f32;
+        }
+        self.nx[range.clone()].fill(nx);
+        self.ny[range.clone()].fill(ny);
+        self.c[range].fill(c);
+    }
+
+    /// The candidate edges of the points `first..first + edges.len()`.
+    pub fn set_side_candidates(&mut self, first: usize, edges: &[PointEdges]) {
+        let (lanes, end) = (self.lanes, first + edges.len());
+        assert!(end <= lanes && self.cand_h.len() == lanes * MAX_CANDIDATES && self.cand_pen.len() == self.cand_h.len());
+        let (cand_h, cand_pen) = (self.cand_h.as_mut_ptr(), self.cand_pen.as_mut_ptr());
+        for (i, e) in (first..end).zip(edges) {
+            let count = e.count as usize;
+            for (k, c) in e.candidates.iter().enumerate() {
+                // Branch-free: whether a slot holds a candidate varies from point to point.
+                let (h, pen) = if k < count { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
+                // SAFETY: i < end <= lanes and k < MAX_CANDIDATES, inside both arrays
+                // (asserted above).
+                unsafe {
+                    *cand_h.add(k * lanes + i) = h;
+                    *cand_pen.add(k * lanes + i) = pen;
+                }
+            }
+        }
+    }
+
+    /// Point `i`'s candidate edges (at most [`MAX_CANDIDATES`]): offsets and penalties.
+    #[inline]
+    pub fn set_candidates(&mut self, i: usize, candidates: &[Candidate]) {
+        let lanes = self.lanes;
+        for k in 0..MAX_CANDIDATES {
+            let (h, pen) = match candidates.get(k) {
+                Some(c) => (c.h_px, c.penalty_px),
+                None => (0.0, f32::INFINITY),
+            };
+            self.cand_h[k * lanes + i] = h;
+            self.cand_pen[k * lanes + i] = pen;
+        }
+    }
+
+    /// Fills the working copies from a pass's points (the tracker sets them as it searches
+    /// instead).
+    #[cfg(test)]
+    fn load(&mut self, points: &FitPoints<'_>, edges: &[PointEdges]) {
         self.resize(points.px.len());
         for side in points.sides {
             for i in side.first..side.first + side.count {
-                self.nx[i] = side.normal.x as f32;
-                self.ny[i] = side.normal.y as f32;
-                self.c[i] = side.np as f32;
+                let (nx, ny, c) = (side.normal.x as f32, side.normal.y as f32, side.np as f32);
+                self.set_point(i, points.px[i] as f32, points.py[i] as f32, nx, ny, c);
             }
         }
-        let n = points.px.len();
-        for (i, e) in points.edges.iter().enumerate() {
-            self.x[i] = points.px[i] as f32;
-            self.y[i] = points.py[i] as f32;
-            for k in 0..MAX_CANDIDATES {
-                let (h, pen) = match e.as_slice().get(k) {
-                    Some(cand) => (cand.h_px, cand.penalty_px),
-                    None => (0.0, f32::INFINITY),
-                };
-                self.cand_h[k * n + i] = h;
-                self.cand_pen[k * n + i] = pen;
-            }
+        for (i, e) in edges.iter().enumerate() {
+            self.set_candidates(i, e.as_slice());
+        }
+    }
+
+    /// The per-point results of the last fit: every point's chosen candidate, residual and
+    /// weight against the final motion. Does nothing before a fit or when already done.
+    pub fn finish(&mut self) {
+        let Some((theta, sigma, loss)) = self.last.take() else {
+            return;
+        };
+        associate_scalar(&theta, self);
+        weigh(loss, sigma, self);
+        for i in 0..self.n {
+            self.residual[i] = self.r[i] as f64;
+            self.weight[i] = self.w[i] as f64;
         }
     }
 }
@@ -163,12 +276,12 @@ pub(crate) struct FitSide {
     pub np: f64,
 }
 
-/// Point geometry of one pass: positions relative to the centre, grouped by side.
+/// Point geometry of one pass: positions relative to the centre, grouped by side (the
+/// candidates are in the [`FitBuffers`]).
 pub(crate) struct FitPoints<'a> {
     pub px: &'a [f64],
     pub py: &'a [f64],
     pub sides: &'a [FitSide],
-    pub edges: &'a [PointEdges],
 }
 
 /// Parameters `θ = (t.x, t.y, a11, a12, a21, a22, g.x, g.y)`.
@@ -208,7 +321,8 @@ const HIST_PER_PX: f64 = 16.0;
 /// the median absolute residual and the weights follow.
 pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &mut FitBuffers) -> FitResult {
     let n = points.px.len();
-    buf.prepare(points);
+    debug_assert_eq!(n, buf.n, "the buffers hold this pass's points");
+    buf.last = None;
     let mut theta = Vec8::zeros();
     // Scale of the template for the ridges: mean |p|².
     let mut p2 = 0.0;
@@ -219,19 +333,31 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
     let sigma_max = settings.sigma_max_px.max(settings.sigma_min_px);
     let mut sigma = sigma_max;
     let iterations = settings.iterations.max(1);
+    // Medians of 1.4826 · median > sigma_max all give sigma_max: the residual histogram
+    // only needs its bins below that, the last one taking everything beyond.
+    let mut top_bin = ((sigma_max / MAD_TO_SIGMA * HIST_PER_PX - 0.5).ceil().max(0.0) as usize).min(HIST_BINS - 1);
+    while top_bin > 0 && MAD_TO_SIGMA * ((top_bin - 1) as f64 + 0.5) / HIST_PER_PX >= sigma_max {
+        top_bin -= 1;
+    }
+    while top_bin < HIST_BINS - 1 && MAD_TO_SIGMA * (top_bin as f64 + 0.5) / HIST_PER_PX < sigma_max {
+        top_bin += 1;
+    }
     for iter in 0..iterations {
-        // 1. Association and residuals under the current motion, with their histogram.
-        let mut hist = [0u16; HIST_BINS];
-        let found = associate(&theta, buf, Some(&mut hist));
+        // 1. Association and residuals under the current motion, with their histogram
+        // (the first iteration uses the largest scale whatever the residuals).
+        let found = if iter == 0 {
+            associate::<false>(&theta, buf)
+        } else {
+            buf.bins.clear(top_bin);
+            associate::<true>(&theta, buf)
+        };
         if found == 0 {
-            buf.weight.iter_mut().for_each(|w| *w = 0.0);
+            buf.last = Some((theta, sigma, settings.loss));
             return result(&theta);
         }
         // 2. Robust scale 1.4826·MAD within bounds; the first iteration starts at the top so
         // that points far from the prediction still get a say.
-        let median = histogram_median(&hist, found);
-        let mad_sigma = 1.4826 * median;
-        sigma = if iter == 0 { mad_sigma.max(sigma_max) } else { mad_sigma };
+        sigma = if iter == 0 { sigma_max } else { MAD_TO_SIGMA * buf.bins.median(found) };
         sigma = sigma.clamp(settings.sigma_min_px, sigma_max);
         // 3. Weights and the moments of each side.
         let mut m = Mat8::zeros();
@@ -296,83 +422,191 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
             break;
         }
     }
-    // Final association, residuals and weights against the final motion (for confidence).
-    associate(&theta, buf, None);
-    weigh(settings.loss, sigma, buf);
-    for i in 0..n {
-        buf.residual[i] = buf.r[i] as f64;
-        buf.weight[i] = buf.w[i] as f64;
-    }
+    // The final association, residuals and weights (for the confidence) wait for
+    // `FitBuffers::finish`: a pass that is followed by another does not need them.
+    buf.last = Some((theta, sigma, settings.loss));
     result(&theta)
 }
 
 /// Gives every point the candidate closest to the motion's prediction (distance plus the
-/// candidate's penalty) and records its offset, residual and index; counts the points with a
-/// candidate and, if asked, bins their absolute residuals. Branch-free over the candidate
-/// slots, so the loop vectorises.
+/// candidate's penalty; the first of equals) and records its offset, residual and whether it
+/// had one; with `BIN`, bins the absolute residuals of those that did. Returns their number.
+/// Four points at a time, branch-free over the candidate slots.
 #[inline]
-fn associate(theta: &Vec8, buf: &mut FitBuffers, hist: Option<&mut [u16; HIST_BINS]>) -> usize {
+fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if buf.avx2 {
+        // SAFETY: the processor has AVX2 (checked when the buffers were made).
+        return unsafe { associate_avx2::<BIN>(theta, buf) };
+    }
+    let th: [F32x4; 8] = std::array::from_fn(|k| F32x4::splat(theta[k] as f32));
+    let lanes = buf.lanes;
+    buf.check_lanes();
+    let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
+    let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
+    let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let inf = F32x4::splat(f32::INFINITY);
+    let scale = F32x4::splat(HIST_PER_PX as f32);
+    let top = F32x4::splat(buf.bins.top as f32);
+    let bins = &mut buf.bins.counts;
+    let mut found = 0usize;
+    for i in (0..lanes).step_by(4) {
+        // SAFETY: i + 4 <= lanes and every array holds `lanes` values per slot (checked
+        // above), so every access below is in bounds.
+        unsafe {
+            let (px, py) = (F32x4::load_ptr(x.add(i)), F32x4::load_ptr(y.add(i)));
+            // n·(t + A p) − c (g·p), in the order of `associate_scalar`.
+            let along_x = th[0].add(th[2].mul(px)).add(th[3].mul(py));
+            let along_y = th[1].add(th[4].mul(px)).add(th[5].mul(py));
+            let perspective = th[6].mul(px).add(th[7].mul(py));
+            let pred = F32x4::load_ptr(nx.add(i))
+                .mul(along_x)
+                .add(F32x4::load_ptr(ny.add(i)).mul(along_y))
+                .sub(F32x4::load_ptr(c.add(i)).mul(perspective));
+            let (mut best, mut best_h) = (inf, F32x4::splat(0.0));
+            for k in 0..MAX_CANDIDATES {
+                let hk = F32x4::load_ptr(cand_h.add(k * lanes + i));
+                let cost = hk.sub(pred).abs().add(F32x4::load_ptr(cand_pen.add(k * lanes + i)));
+                let better = cost.lt(best);
+                best = better.select(cost, best);
+                best_h = better.select(hk, best_h);
+            }
+            let valid = best.lt(inf);
+            let r = best_h.sub(pred);
+            best_h.store_ptr(h.add(i));
+            r.store_ptr(r_out.add(i));
+            valid.store_ptr(valid_out.add(i));
+            let bits = valid.mask_bits();
+            found += bits.count_ones() as usize;
+            if BIN {
+                // Bin |r| · 16, the top bin taking everything beyond (and a NaN residual,
+                // which only a non-finite motion makes, and the tracker declares that lost).
+                let scaled = r.abs().mul(scale);
+                let lane_bins = scaled.lt(top).select(scaled, top).to_i32_array();
+                for (l, bin) in lane_bins.iter().enumerate() {
+                    bins[*bin as usize][l] += ((bits >> l) & 1) as u16;
+                }
+            }
+        }
+    }
+    found
+}
+
+/// [`associate`] eight points at a time with AVX (the same f32 operations per lane, so the
+/// same results).
+///
+/// # Safety
+/// The processor supports AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+    use std::arch::x86_64::*;
+    let lanes = buf.lanes;
+    buf.check_lanes();
+    let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
+    let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
+    let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let top_bin = buf.bins.top;
+    let bins = &mut buf.bins.counts;
+    let th: [__m256; 8] = std::array::from_fn(|k| _mm256_set1_ps(theta[k] as f32));
+    let inf = _mm256_set1_ps(f32::INFINITY);
+    let sign_bit = _mm256_set1_ps(-0.0);
+    let scale = _mm256_set1_ps(HIST_PER_PX as f32);
+    let top = _mm256_set1_ps(top_bin as f32);
+    let mut found = 0usize;
+    for i in (0..lanes).step_by(8) {
+        // SAFETY: i + 8 <= lanes (lanes is a multiple of 8) and every array holds `lanes`
+        // values per slot (checked above).
+        unsafe {
+            let (px, py) = (_mm256_loadu_ps(x.add(i)), _mm256_loadu_ps(y.add(i)));
+            let along_x = _mm256_add_ps(_mm256_add_ps(th[0], _mm256_mul_ps(th[2], px)), _mm256_mul_ps(th[3], py));
+            let along_y = _mm256_add_ps(_mm256_add_ps(th[1], _mm256_mul_ps(th[4], px)), _mm256_mul_ps(th[5], py));
+            let perspective = _mm256_add_ps(_mm256_mul_ps(th[6], px), _mm256_mul_ps(th[7], py));
+            let pred = _mm256_sub_ps(
+                _mm256_add_ps(
+                    _mm256_mul_ps(_mm256_loadu_ps(nx.add(i)), along_x),
+                    _mm256_mul_ps(_mm256_loadu_ps(ny.add(i)), along_y),
+                ),
+                _mm256_mul_ps(_mm256_loadu_ps(c.add(i)), perspective),
+            );
+            let (mut best, mut best_h) = (inf, _mm256_setzero_ps());
+            for k in 0..MAX_CANDIDATES {
+                let hk = _mm256_loadu_ps(cand_h.add(k * lanes + i));
+                let distance = _mm256_andnot_ps(sign_bit, _mm256_sub_ps(hk, pred));
+                let cost = _mm256_add_ps(distance, _mm256_loadu_ps(cand_pen.add(k * lanes + i)));
+                let better = _mm256_cmp_ps::<_CMP_LT_OQ>(cost, best);
+                best = _mm256_blendv_ps(best, cost, better);
+                best_h = _mm256_blendv_ps(best_h, hk, better);
+            }
+            let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(best, inf);
+            let r = _mm256_sub_ps(best_h, pred);
+            _mm256_storeu_ps(h.add(i), best_h);
+            _mm256_storeu_ps(r_out.add(i), r);
+            _mm256_storeu_ps(valid_out.add(i), valid);
+            let bits = _mm256_movemask_ps(valid) as u32;
+            found += bits.count_ones() as usize;
+            if BIN {
+                let scaled = _mm256_mul_ps(_mm256_andnot_ps(sign_bit, r), scale);
+                let capped = _mm256_blendv_ps(top, scaled, _mm256_cmp_ps::<_CMP_LT_OQ>(scaled, top));
+                let mut lane_bins = [0i32; 8];
+                _mm256_storeu_si256(lane_bins.as_mut_ptr() as *mut __m256i, _mm256_cvttps_epi32(capped));
+                for (l, bin) in lane_bins.iter().enumerate() {
+                    bins[*bin as usize][l] += ((bits >> l) & 1) as u16;
+                }
+            }
+        }
+    }
+    found
+}
+
+/// [`associate`] one point at a time, also recording the chosen candidate's index: the final
+/// association of a fit.
+fn associate_scalar(theta: &Vec8, buf: &mut FitBuffers) {
     let th: [f32; 8] = std::array::from_fn(|k| theta[k] as f32);
-    let n = buf.x.len();
-    let (x, y, nx, ny, c) = (&buf.x[..n], &buf.y[..n], &buf.nx[..n], &buf.ny[..n], &buf.c[..n]);
-    let (cand_h, cand_pen) = (&buf.cand_h[..n * MAX_CANDIDATES], &buf.cand_pen[..n * MAX_CANDIDATES]);
-    let (h, r, chosen) = (&mut buf.h[..n], &mut buf.r[..n], &mut buf.chosen[..n]);
-    for i in 0..n {
-        // n·(t + A p) − c (g·p): the normal offset the motion predicts at the point.
-        let (px, py) = (x[i], y[i]);
-        let pred = nx[i] * (th[0] + th[2] * px + th[3] * py) + ny[i] * (th[1] + th[4] * px + th[5] * py)
-            - c[i] * (th[6] * px + th[7] * py);
+    let lanes = buf.lanes;
+    for i in 0..buf.n {
+        let (px, py) = (buf.x[i], buf.y[i]);
+        let pred = buf.nx[i] * (th[0] + th[2] * px + th[3] * py) + buf.ny[i] * (th[1] + th[4] * px + th[5] * py)
+            - buf.c[i] * (th[6] * px + th[7] * py);
         let (mut best, mut best_h, mut best_k) = (f32::INFINITY, 0.0f32, -1i8);
         for k in 0..MAX_CANDIDATES {
-            let hk = cand_h[k * n + i];
-            let cost = (hk - pred).abs() + cand_pen[k * n + i];
+            let hk = buf.cand_h[k * lanes + i];
+            let cost = (hk - pred).abs() + buf.cand_pen[k * lanes + i];
             if cost < best {
                 (best, best_h, best_k) = (cost, hk, k as i8);
             }
         }
-        h[i] = best_h;
-        r[i] = best_h - pred;
-        chosen[i] = best_k;
+        buf.h[i] = best_h;
+        buf.r[i] = best_h - pred;
+        buf.valid[i] = f32::from_bits(if best_k >= 0 { u32::MAX } else { 0 });
+        buf.chosen[i] = best_k;
     }
-    let mut found = 0usize;
-    match hist {
-        Some(hist) => {
-            for (&ri, &k) in r.iter().zip(chosen.iter()) {
-                let valid = (k >= 0) as u16;
-                hist[((ri.abs() * HIST_PER_PX as f32) as usize).min(HIST_BINS - 1)] += valid;
-                found += valid as usize;
-            }
-        }
-        None => found = chosen.iter().filter(|k| **k >= 0).count(),
-    }
-    found
 }
 
 /// Robust weights of every point (0 without a candidate) into `buf.w`.
 #[inline]
 fn weigh(loss: RobustLoss, sigma: f64, buf: &mut FitBuffers) {
-    let n = buf.x.len();
-    let (r, chosen, w) = (&buf.r[..n], &buf.chosen[..n], &mut buf.w[..n]);
-    match loss {
-        RobustLoss::Tukey => {
-            let inv = (1.0 / (4.685 * sigma)) as f32;
-            for ((w, &r), &k) in w.iter_mut().zip(r).zip(chosen) {
-                let u = r * inv;
-                let t = (1.0 - u * u).max(0.0);
-                *w = if k >= 0 { t * t } else { 0.0 };
-            }
-        }
-        RobustLoss::Huber => {
-            let k_px = (1.345 * sigma) as f32;
-            for ((w, &r), &k) in w.iter_mut().zip(r).zip(chosen) {
-                let a = r.abs();
-                *w = if k < 0 { 0.0 } else if a <= k_px { 1.0 } else { k_px / a };
-            }
-        }
-        RobustLoss::LeastSquares => {
-            for (w, &k) in w.iter_mut().zip(chosen) {
-                *w = if k >= 0 { 1.0 } else { 0.0 };
-            }
+    buf.check_lanes();
+    let (r, valid, w) = (buf.r.as_ptr(), buf.valid.as_ptr(), buf.w.as_mut_ptr());
+    let one = F32x4::splat(1.0);
+    let (inv_tukey, k_huber) = (F32x4::splat((1.0 / (4.685 * sigma)) as f32), F32x4::splat((1.345 * sigma) as f32));
+    for i in (0..buf.lanes).step_by(4) {
+        // SAFETY: i + 4 <= lanes, the length of all three arrays (checked above).
+        unsafe {
+            let r = F32x4::load_ptr(r.add(i));
+            let weight = match loss {
+                RobustLoss::Tukey => {
+                    let u = r.mul(inv_tukey);
+                    let t = one.sub(u.mul(u)).max(F32x4::splat(0.0));
+                    t.mul(t)
+                }
+                RobustLoss::Huber => {
+                    let a = r.abs();
+                    a.le(k_huber).select(one, k_huber.div(a))
+                }
+                RobustLoss::LeastSquares => one,
+            };
+            weight.and(F32x4::load_ptr(valid.add(i))).store_ptr(w.add(i));
         }
     }
 }
@@ -380,32 +614,29 @@ fn weigh(loss: RobustLoss, sigma: f64, buf: &mut FitBuffers) {
 /// Moments of one side's weighted points, summed four lanes at a time.
 #[inline]
 fn side_moments(side: &FitSide, buf: &FitBuffers) -> Moments {
-    let range = side.first..side.first + side.count;
-    let (x, y, h, w) = (&buf.x[range.clone()], &buf.y[range.clone()], &buf.h[range.clone()], &buf.w[range]);
-    const L: usize = 4;
-    let mut acc = [[0.0f32; L]; 9];
-    let full = x.len() / L * L;
-    for j in (0..full).step_by(L) {
-        for l in 0..L {
-            let (xi, yi, hi, wi) = (x[j + l], y[j + l], h[j + l], w[j + l]);
-            let (wx, wy, wh) = (wi * xi, wi * yi, wi * hi);
-            acc[0][l] += wi;
-            acc[1][l] += wx;
-            acc[2][l] += wy;
-            acc[3][l] += wx * xi;
-            acc[4][l] += wx * yi;
-            acc[5][l] += wy * yi;
-            acc[6][l] += wh;
-            acc[7][l] += wh * xi;
-            acc[8][l] += wh * yi;
+    let (first, end) = (side.first, side.first + side.count);
+    let full = first + side.count / 4 * 4;
+    let zero = F32x4::splat(0.0);
+    let mut acc = [zero; 9];
+    buf.check_lanes();
+    assert!(end <= buf.lanes, "side beyond the points");
+    let (x, y, h, w) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.h.as_ptr(), buf.w.as_ptr());
+    for j in (first..full).step_by(4) {
+        // SAFETY: j + 4 <= full <= end <= lanes, the arrays' length (checked above).
+        let (xi, yi, hi, wi) =
+            unsafe { (F32x4::load_ptr(x.add(j)), F32x4::load_ptr(y.add(j)), F32x4::load_ptr(h.add(j)), F32x4::load_ptr(w.add(j))) };
+        let (wx, wy, wh) = (wi.mul(xi), wi.mul(yi), wi.mul(hi));
+        let add = [wi, wx, wy, wx.mul(xi), wx.mul(yi), wy.mul(yi), wh, wh.mul(xi), wh.mul(yi)];
+        for (a, v) in acc.iter_mut().zip(add) {
+            *a = a.add(v);
         }
     }
     let mut sum = [0.0f64; 9];
     for (s, a) in sum.iter_mut().zip(&acc) {
-        *s = a.iter().map(|v| *v as f64).sum();
+        *s = a.to_array().iter().map(|v| *v as f64).sum();
     }
-    for j in full..x.len() {
-        let (xi, yi, hi, wi) = (x[j] as f64, y[j] as f64, h[j] as f64, w[j] as f64);
+    for j in full..end {
+        let (xi, yi, hi, wi) = (buf.x[j] as f64, buf.y[j] as f64, buf.h[j] as f64, buf.w[j] as f64);
         let (wx, wy, wh) = (wi * xi, wi * yi, wi * hi);
         let add = [wi, wx, wy, wx * xi, wx * yi, wy * yi, wh, wh * xi, wh * yi];
         for (s, a) in sum.iter_mut().zip(add) {
@@ -423,17 +654,54 @@ fn result(theta: &Vec8) -> FitResult {
     }
 }
 
-/// Median of the values binned in `hist` (bin centre), `count` values in all.
-fn histogram_median(hist: &[u16; HIST_BINS], count: usize) -> f64 {
-    let half = count.div_ceil(2);
-    let mut seen = 0usize;
-    for (bin, &c) in hist.iter().enumerate() {
-        seen += c as usize;
-        if seen >= half {
-            return (bin as f64 + 0.5) / HIST_PER_PX;
-        }
+/// Whether the processor has AVX2 (checked once per tracker, when its buffers are made).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    return false;
+}
+
+/// The working arrays are padded to a multiple of this many points (the widest loop).
+const LANES: usize = 8;
+
+/// 1.4826 · MAD estimates the standard deviation of normally distributed residuals.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// The histogram of absolute residuals behind the robust scale: 1/16 px bins, `top` taking
+/// everything from there on. One count per lane of [`associate`], so that the lanes'
+/// increments (often of the same bin) do not wait on each other.
+#[derive(Debug, Clone)]
+struct ResidualBins {
+    counts: [[u16; LANES]; HIST_BINS],
+    top: usize,
+}
+
+impl Default for ResidualBins {
+    fn default() -> Self {
+        Self { counts: [[0; LANES]; HIST_BINS], top: HIST_BINS - 1 }
     }
-    HIST_BINS as f64 / HIST_PER_PX
+}
+
+impl ResidualBins {
+    /// Empties the bins up to `top` and makes that the last one.
+    fn clear(&mut self, top: usize) {
+        self.top = top.min(HIST_BINS - 1);
+        self.counts[..=self.top].fill([0; LANES]);
+    }
+
+    /// Median of the `count` binned values (bin centre), px.
+    fn median(&self, count: usize) -> f64 {
+        let half = count.div_ceil(2);
+        let mut seen = 0usize;
+        for (bin, c) in self.counts[..=self.top].iter().enumerate() {
+            seen += c.iter().map(|v| *v as usize).sum::<usize>();
+            if seen >= half {
+                return (bin as f64 + 0.5) / HIST_PER_PX;
+            }
+        }
+        HIST_BINS as f64 / HIST_PER_PX
+    }
 }
 
 /// Adds one side's share to the normal equations `M θ = b`. A point's row is
@@ -470,43 +738,103 @@ fn accumulate_side(m: &mut Mat8, b: &mut Vec8, side: &FitSide, mo: &Moments) {
 }
 
 /// A.1: `M_tt t = b_t − M_ts s` with the shape `s` of `theta` held.
+///
+/// The small solves here are written out rather than left to nalgebra's general routines
+/// (views, copies and loops sized at run time cost more than the arithmetic); the order of
+/// operations is nalgebra's, so the results are the same.
 fn solve_translation(m: &Mat8, b: &Vec8, theta: &Vec8, wsum: f64) -> Vector2<f64> {
-    let mut mtt = m.fixed_view::<2, 2>(0, 0).into_owned();
-    let rhs = b.fixed_rows::<2>(0) - m.fixed_view::<2, 6>(0, 2) * theta.fixed_rows::<6>(2);
+    // rhs = b_t − M_ts s, the product column by column.
+    let rhs: [f64; 2] = std::array::from_fn(|i| {
+        let mut p = m[(i, 2)] * theta[2];
+        for j in 3..8 {
+            p += m[(i, j)] * theta[j];
+        }
+        b[i] - p
+    });
     // A tiny ridge keeps the motion along a lone straight side (unobservable) at zero.
-    mtt[(0, 0)] += 1e-6 * wsum;
-    mtt[(1, 1)] += 1e-6 * wsum;
-    mtt.try_inverse().map(|inv| inv * rhs).unwrap_or_else(|| Vector2::new(theta[0], theta[1]))
+    let (m11, m12, m21, m22) = (m[(0, 0)] + 1e-6 * wsum, m[(0, 1)], m[(1, 0)], m[(1, 1)] + 1e-6 * wsum);
+    let det = m11 * m22 - m21 * m12;
+    if det == 0.0 {
+        return Vector2::new(theta[0], theta[1]);
+    }
+    let inv = [[m22 / det, -m12 / det], [-m21 / det, m11 / det]];
+    Vector2::new(inv[0][0] * rhs[0] + inv[0][1] * rhs[1], inv[1][0] * rhs[0] + inv[1][1] * rhs[1])
+}
+
+/// Solves `a x = rhs` for a symmetric positive definite `a` (only its lower triangle is read)
+/// by Cholesky factorisation in place; `rhs` becomes `x`. False, with `rhs` left part-way,
+/// when `a` is not positive definite.
+// Two indices into one matrix read more plainly than iterator chains here.
+#[allow(clippy::needless_range_loop)]
+fn cholesky_solve<const K: usize>(a: &mut [[f64; K]; K], rhs: &mut [f64; K]) -> bool {
+    for j in 0..K {
+        for k in 0..j {
+            let f = a[j][k];
+            for i in j..K {
+                a[i][j] += -f * a[i][k];
+            }
+        }
+        let d = a[j][j];
+        if d <= 0.0 || d.is_nan() {
+            return false;
+        }
+        let d = d.sqrt();
+        a[j][j] = d;
+        for i in j + 1..K {
+            a[i][j] /= d;
+        }
+    }
+    // L y = rhs, then Lᵀ x = y.
+    for i in 0..K {
+        let y = rhs[i] / a[i][i];
+        rhs[i] = y;
+        for r in i + 1..K {
+            rhs[r] += -y * a[r][i];
+        }
+    }
+    for i in (0..K).rev() {
+        let mut dot = 0.0;
+        for r in i + 1..K {
+            dot += a[r][i] * rhs[r];
+        }
+        rhs[i] = (rhs[i] - dot) / a[i][i];
+    }
+    true
 }
 
 /// Translation with A.2 (`K = 6`) or with A.2 and perspective (`K = 8`) solved together:
 /// the fixed point the two stages converge to, reached in one step once the association has
 /// settled; same ridges and prior as the staged solve.
 fn solve_joint<const K: usize>(m: &Mat8, b: &Vec8, theta: &mut Vec8, wsum: f64, ridge_a: f64, ridge_g: f64) {
-    let mut mk = m.fixed_view::<K, K>(0, 0).into_owned();
-    let rhs = b.fixed_rows::<K>(0).into_owned();
-    for k in 0..K {
-        mk[(k, k)] += match k {
+    let mut mk: [[f64; K]; K] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
+    let mut rhs: [f64; K] = std::array::from_fn(|i| b[i]);
+    for (k, row) in mk.iter_mut().enumerate() {
+        row[k] += match k {
             0 | 1 => 1e-6 * wsum,
             2..=5 => ridge_a,
             _ => ridge_g,
         };
     }
-    if let Some(ch) = mk.cholesky() {
-        theta.fixed_rows_mut::<K>(0).copy_from(&ch.solve(&rhs));
+    if cholesky_solve(&mut mk, &mut rhs) {
+        for (k, v) in rhs.iter().enumerate() {
+            theta[k] = *v;
+        }
     }
 }
 
 /// A.2 (`K = 4`: `A`) or A.2 with perspective (`K = 6`: `A, g`) given the translation in
 /// `theta`, ridge-regularised towards no change of shape.
 fn solve_shape<const K: usize>(m: &Mat8, b: &Vec8, theta: &mut Vec8, ridge_a: f64, ridge_g: f64) {
-    let mut mss = m.fixed_view::<K, K>(2, 2).into_owned();
-    let rhs = b.fixed_rows::<K>(2) - m.fixed_view::<K, 2>(2, 0) * theta.fixed_rows::<2>(0);
-    for k in 0..K {
-        mss[(k, k)] += if k < 4 { ridge_a } else { ridge_g };
+    let mut mss: [[f64; K]; K] = std::array::from_fn(|i| std::array::from_fn(|j| m[(2 + i, 2 + j)]));
+    // rhs = b_s − M_st t, the product column by column.
+    let mut rhs: [f64; K] = std::array::from_fn(|i| b[2 + i] - (m[(2 + i, 0)] * theta[0] + m[(2 + i, 1)] * theta[1]));
+    for (k, row) in mss.iter_mut().enumerate() {
+        row[k] += if k < 4 { ridge_a } else { ridge_g };
     }
-    if let Some(ch) = mss.cholesky() {
-        theta.fixed_rows_mut::<K>(2).copy_from(&ch.solve(&rhs));
+    if cholesky_solve(&mut mss, &mut rhs) {
+        for (k, v) in rhs.iter().enumerate() {
+            theta[2 + k] = *v;
+        }
     }
 }
 
@@ -567,6 +895,14 @@ mod tests {
         (px, py, sides)
     }
 
+    /// A whole fit as the tracker runs it: candidates in, fit, per-point results out.
+    fn run_fit(pts: &FitPoints<'_>, edges: &[PointEdges], settings: &FitSettings, buf: &mut FitBuffers) -> FitResult {
+        buf.load(pts, edges);
+        let fit = fit_motion(pts, settings, buf);
+        buf.finish();
+        fit
+    }
+
     fn settings(model: DeformationModel, loss: RobustLoss) -> FitSettings {
         FitSettings {
             model,
@@ -604,18 +940,18 @@ mod tests {
         let a = Matrix2::new(0.02, -0.03, 0.025, -0.01);
         let mut buf = FitBuffers::with_capacity(px.len());
         let edges = exact_edges(&px, &py, &sides, t, a, Vector2::zeros());
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
-        let fit = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
+        let fit = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
         assert!((fit.t - t).norm() < 1e-3, "{:?}", fit.t);
         assert!((fit.a - a).norm() < 1e-4, "{:?}", fit.a);
         // Perspective too (first-order model: exact for exact first-order data).
         let g = Vector2::new(4e-4, -3e-4);
         let edges = exact_edges(&px, &py, &sides, t, a, g);
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
         // On this symmetric rectangle translation and perspective are strongly coupled, so the
         // alternating stages need many iterations to converge (a tracker gets them over frames).
         let many = FitSettings { iterations: 400, ..settings(DeformationModel::Projective, RobustLoss::Tukey) };
-        let fit = fit_motion(&pts, &many, &mut buf);
+        let fit = run_fit(&pts, &edges, &many, &mut buf);
         assert!((fit.t - t).norm() < 1e-3 && (fit.a - a).norm() < 1e-4, "{:?} {:?}", fit.t, fit.a);
         assert!((fit.g - g).norm() < 1e-6, "{:?}", fit.g);
     }
@@ -626,18 +962,18 @@ mod tests {
         let s = settings(DeformationModel::FullVector, RobustLoss::LeastSquares);
         let mut buf = FitBuffers::with_capacity(px.len());
         let edges = exact_edges(&px, &py, &sides, Vector2::new(3.0, 1.0), Matrix2::zeros(), Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         assert!((fit.t - Vector2::new(3.0, 1.0)).norm() < 1e-4);
         assert!(fit.a.norm() < 1e-6);
         // A scaling and a rotation are recovered only in part: A.3 takes each normal offset
         // for the whole displacement and so misses the part along the side (aperture problem).
         let scale = Matrix2::new(0.02, 0.0, 0.0, 0.02);
         let edges = exact_edges(&px, &py, &sides, Vector2::zeros(), scale, Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         assert!(fit.a[(0, 0)] > 0.005 && fit.a[(0, 0)] < 0.019, "{:?}", fit.a);
         let rot = Matrix2::new(0.0, -0.02, 0.02, 0.0);
         let edges = exact_edges(&px, &py, &sides, Vector2::zeros(), rot, Vector2::zeros());
-        let fit = fit_motion(&FitPoints { px: &px, py: &py, sides: &sides, edges: &edges }, &s, &mut buf);
+        let fit = run_fit(&FitPoints { px: &px, py: &py, sides: &sides }, &edges, &s, &mut buf);
         let got = fit.a[(1, 0)] - fit.a[(0, 1)];
         assert!(got > 0.0 && got < 0.04 * 0.9, "rotation part {got}");
     }
@@ -668,16 +1004,16 @@ mod tests {
                 e
             })
             .collect();
-        let pts = FitPoints { px: &px, py: &py, sides: &sides, edges: &edges };
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
         let mut buf = FitBuffers::with_capacity(px.len());
-        let fit = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
+        let fit = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::Tukey), &mut buf);
         assert!((fit.t - t).norm() < 0.05 && fit.a.norm() < 1e-3, "{:?} {:?}", fit.t, fit.a);
         let wrong_choice = (0..px.len()).filter(|i| i % 5 != 2 && buf.chosen[*i] != (i % 3 == 0) as i8).count();
         assert_eq!(wrong_choice, 0);
         let outliers_weighted = (0..px.len()).filter(|i| i % 5 == 2 && buf.weight[*i] > 0.0).count();
         assert_eq!(outliers_weighted, 0);
         // Plain least squares is dragged off by the same data.
-        let ls = fit_motion(&pts, &settings(DeformationModel::NormalOnly, RobustLoss::LeastSquares), &mut buf);
+        let ls = run_fit(&pts, &edges, &settings(DeformationModel::NormalOnly, RobustLoss::LeastSquares), &mut buf);
         assert!((ls.t - t).norm() > 0.1 || ls.a.norm() > 1e-2, "{:?} {:?}", ls.t, ls.a);
     }
 
@@ -692,14 +1028,68 @@ mod tests {
         buf.resize(1);
         let mut edges = vec![e];
         let run = |edges: &[PointEdges], buf: &mut FitBuffers| {
-            let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side], edges };
-            buf.prepare(&pts);
-            associate(&Vec8::zeros(), buf, None)
+            let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side] };
+            buf.load(&pts, edges);
+            // The four-lane association and the final one agree.
+            let found = associate::<true>(&Vec8::zeros(), buf);
+            let (h, r) = (buf.h[0], buf.r[0]);
+            associate_scalar(&Vec8::zeros(), buf);
+            assert_eq!((h, r), (buf.h[0], buf.r[0]));
+            found
         };
         assert_eq!(run(&edges, &mut buf), 1);
         assert_eq!((buf.chosen[0], buf.r[0]), (1, 1.2));
         edges[0].candidates[0].penalty_px = 0.0;
         run(&edges, &mut buf);
         assert_eq!((buf.chosen[0], buf.r[0]), (0, -1.0));
+    }
+
+    #[test]
+    fn every_association_path_gives_the_same_choices_residuals_and_histogram() {
+        // Random points and candidates (some slots empty, some tied), a random motion: the
+        // four-lane, the eight-lane (where the processor has it) and the one-at-a-time
+        // association must agree bit for bit.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let n = 61;
+        let (px, py): (Vec<f64>, Vec<f64>) = (0..n).map(|_| (next() * 200.0 - 100.0, next() * 120.0 - 60.0)).unzip();
+        let sides = [
+            FitSide { first: 0, count: 30, normal: Vector2::new(0.6, 0.8), np: 12.0 },
+            FitSide { first: 30, count: 31, normal: Vector2::new(-1.0, 0.0), np: -40.0 },
+        ];
+        let edges: Vec<PointEdges> = (0..n)
+            .map(|_| {
+                let mut e = PointEdges { count: (next() * 5.0) as u8, ..Default::default() };
+                for c in &mut e.candidates[..e.count as usize] {
+                    c.h_px = ((next() * 20.0 - 10.0) * 4.0).round() as f32 / 4.0;
+                    c.penalty_px = if next() < 0.3 { (next() * 3.0) as f32 } else { 0.0 };
+                }
+                e
+            })
+            .collect();
+        let theta = Vec8::from_fn(|k, _| [1.3, -0.7, 0.02, -0.01, 0.015, 0.03, 2e-4, -1e-4][k]);
+        let pts = FitPoints { px: &px, py: &py, sides: &sides };
+        let run = |avx2: bool| {
+            let mut buf = FitBuffers::with_capacity(n);
+            buf.avx2 = avx2 && buf.avx2;
+            buf.load(&pts, &edges);
+            buf.bins.clear(40);
+            let found = associate::<true>(&theta, &mut buf);
+            (found, buf.h.clone(), buf.r.clone(), buf.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), buf)
+        };
+        let (found4, h4, r4, valid4, mut buf4) = run(false);
+        let (found8, h8, r8, valid8, buf8) = run(true);
+        assert_eq!((found4, &h4, &r4, &valid4), (found8, &h8, &r8, &valid8));
+        let total = |b: &FitBuffers| -> Vec<usize> { b.bins.counts[..=40].iter().map(|c| c.iter().map(|v| *v as usize).sum()).collect() };
+        assert_eq!(total(&buf4), total(&buf8));
+        assert!(found4 > 30 && found4 < n, "the data must mix points with and without candidates");
+        associate_scalar(&theta, &mut buf4);
+        assert_eq!((&buf4.h, &buf4.r), (&h4, &r4));
+        assert_eq!(buf4.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), valid4);
     }
 }

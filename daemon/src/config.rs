@@ -1,0 +1,516 @@
+//! The daemon's configuration (`daemon.toml`): everything a user sets up once for a robot
+//! and camera pair — loop timing, the gripper model, the calibration cage, gains, time-outs
+//! and thresholds. Every table rejects unknown keys; every key has a default (the values
+//! that fit the simulator's arm), so a file needs only what differs.
+//!
+//! Units are in the names. Time-outs count **frames** at the nominal `frame_rate_hz`, so a
+//! lockstep run (faster than real time) gets the same simulated time as a real-time one;
+//! the stale-stream guard is the only wall-clock limit.
+//!
+//! ```
+//! use handeye_daemon::config::DaemonConfig;
+//! let cfg = DaemonConfig::parse("[servo]\ngain = 0.4\n", "daemon.toml".as_ref()).unwrap();
+//! assert_eq!(cfg.servo.gain, 0.4);
+//! let err = DaemonConfig::parse("[servo]\ngian = 0.4\n", "daemon.toml".as_ref()).unwrap_err();
+//! assert!(err.to_string().contains("gian"), "{err}");
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// A configuration file that could not be used: the file, and the field with what was wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{file}: cannot read: {source}")]
+    Read { file: PathBuf, source: std::io::Error },
+    #[error("{file}: {message}")]
+    Parse { file: PathBuf, message: String },
+    #[error("{file}: {field} = {value}: {expected}")]
+    Invalid { file: PathBuf, field: &'static str, value: String, expected: &'static str },
+}
+
+/// `daemon.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaemonConfig {
+    /// Nominal camera frame rate: time-outs and tracker time steps count frames at this rate.
+    pub frame_rate_hz: f64,
+    /// A cycle (frame received → command sent) longer than this is a deadline miss, µs.
+    pub deadline_us: u64,
+    /// Stop the arm when no frame arrives for this long (wall clock), ms.
+    pub stale_frame_ms: u64,
+    /// Longest wait for the first frame at start-up, s (wall clock).
+    pub start_timeout_s: f64,
+    /// After `done`, keep answering frames (holding) for this long before exiting, s of frames;
+    /// the run also ends when the camera stream goes away.
+    pub done_hold_s: f64,
+    pub gripper: GripperModel,
+    pub calibration: CalibrationConfig,
+    pub acquire: AcquireConfig,
+    pub target: TargetConfig,
+    pub servo: ServoSettings,
+    pub grasp: GraspConfig,
+    pub safety: SafetyConfig,
+    pub tracker: TrackerSettings,
+}
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        Self {
+            frame_rate_hz: 30.0,
+            deadline_us: 1000,
+            stale_frame_ms: 100,
+            start_timeout_s: 60.0,
+            done_hold_s: 4.0,
+            gripper: GripperModel::default(),
+            calibration: CalibrationConfig::default(),
+            acquire: AcquireConfig::default(),
+            target: TargetConfig::default(),
+            servo: ServoSettings::default(),
+            grasp: GraspConfig::default(),
+            safety: SafetyConfig::default(),
+            tracker: TrackerSettings::default(),
+        }
+    }
+}
+
+/// The gripper as the daemon needs to know it. Plate coordinates: metres on the tracked
+/// plate, origin anywhere on it, `a` to the right and `b` up as seen facing the plate, and
+/// `n` its outward normal (`a, b, n` right-handed). The plate's normal must be the jaws'
+/// closing axis, so that "plate coplanar with the facet" means "jaws closing across it".
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GripperModel {
+    /// The tracked rectangle's corners `(a, b)`: top-left, top-right, bottom-right,
+    /// bottom-left as seen facing the plate (a parallelogram), metres.
+    pub plate_corners_m: [[f64; 2]; 4],
+    /// Three non-collinear points on the plate whose parallax the servo drives, `(a, b)`, m.
+    pub marks_m: [[f64; 2]; 3],
+    /// The reference point tracked during calibration (the servo's gripper position), m.
+    pub reference_m: [f64; 2],
+    /// The tool point (where the jaws close) relative to the reference point, `(a, b, n)`, m.
+    /// The simulator's gripper: 0.10 m below the plate centre, 0.056 m behind the plate.
+    pub tool_from_reference_m: [f64; 3],
+    /// Widest jaw opening, m.
+    pub max_opening_m: f64,
+    /// Direction of the plate normal in the robot's x-y plane at tool yaw 0 (it turns with
+    /// the yaw). The robot turns the tool about the vertical through the tool point; the
+    /// servo turns about the plate's reference point, and this converts one into the other.
+    pub normal_at_zero_yaw: [f64; 2],
+    /// The tracked rectangle is brighter than its surround (a light plate in a dark
+    /// border): its tracker then accepts only edges of that sign, so it can never slide onto
+    /// the border's outer edge.
+    pub plate_bright_inside: bool,
+}
+
+impl Default for GripperModel {
+    fn default() -> Self {
+        Self {
+            plate_corners_m: [[-0.021, 0.023], [0.021, 0.023], [0.021, -0.023], [-0.021, -0.023]],
+            marks_m: [[-0.016, 0.018], [0.016, 0.018], [0.0, -0.018]],
+            reference_m: [0.0, 0.0],
+            tool_from_reference_m: [0.0, -0.100, -0.056],
+            max_opening_m: 0.080,
+            normal_at_zero_yaw: [0.0, 1.0],
+            plate_bright_inside: true,
+        }
+    }
+}
+
+/// The self-calibration: the cage of points the gripper visits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibrationConfig {
+    /// Tool positions to visit, robot frame, metres (>= 4 non-coplanar; the thesis uses the
+    /// eight corners of a box, the lower four a few cm above the table).
+    pub cage_m: Vec<[f64; 3]>,
+    /// Tool speed between cage points, m/s.
+    pub speed_mps: f64,
+    /// Frames to wait after the arm reports arrival before sampling.
+    pub settle_frames: u32,
+    /// Frames averaged per cage point.
+    pub samples: u32,
+    /// Refuse a fit whose RMS residual exceeds this, px.
+    pub max_residual_px: f64,
+    /// Refuse an epipolar constraint whose RMS residual exceeds this, px.
+    pub max_epipolar_px: f64,
+    /// Time-out per cage point, s.
+    pub point_timeout_s: f64,
+    /// Where to put the tool after calibrating (out of the target's way), robot frame, m;
+    /// empty = back where it started.
+    pub park_m: Vec<f64>,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self {
+            cage_m: vec![
+                [0.27, -0.10, 0.06],
+                [0.45, -0.10, 0.06],
+                [0.45, 0.10, 0.06],
+                [0.27, 0.10, 0.06],
+                [0.27, -0.10, 0.20],
+                [0.45, -0.10, 0.20],
+                [0.45, 0.10, 0.20],
+                [0.27, 0.10, 0.20],
+            ],
+            speed_mps: 0.10,
+            settle_frames: 3,
+            samples: 3,
+            max_residual_px: 8.0,
+            max_epipolar_px: 2.0,
+            point_timeout_s: 8.0,
+            park_m: Vec::new(),
+        }
+    }
+}
+
+/// Acquiring the gripper by opening and closing the jaws.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AcquireConfig {
+    /// Frames to wait, arm and jaws still, before taking each of the open and closed frames.
+    pub settle_frames: u32,
+    /// Frames the new plate trackers must track before they are trusted.
+    pub converge_frames: u32,
+    /// Smallest tracker confidence score accepted at the end of the convergence.
+    pub min_score: f64,
+    /// Smallest plate image, px² (each view).
+    pub min_plate_area_px2: f64,
+    /// Whole phase time-out, s.
+    pub timeout_s: f64,
+}
+
+impl Default for AcquireConfig {
+    fn default() -> Self {
+        Self { settle_frames: 4, converge_frames: 15, min_score: 0.5, min_plate_area_px2: 300.0, timeout_s: 20.0 }
+    }
+}
+
+/// Acquiring the target from the operator hint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TargetConfig {
+    /// Frames the target trackers must track (arm still) before the servo starts.
+    pub converge_frames: u32,
+    pub min_score: f64,
+    /// Refuse a hint whose corners break the epipolar constraint by more than this (RMS), px.
+    pub max_epipolar_px: f64,
+    pub timeout_s: f64,
+}
+
+impl Default for TargetConfig {
+    fn default() -> Self {
+        Self { converge_frames: 15, min_score: 0.35, max_epipolar_px: 8.0, timeout_s: 10.0 }
+    }
+}
+
+/// The coplanarity servo (see `handeye_vision::servo`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ServoSettings {
+    pub gain: f64,
+    pub max_step_m: f64,
+    pub max_yaw_step_deg: f64,
+    pub converged_m: f64,
+    pub converged_deg: f64,
+    pub converged_steps: u32,
+    pub max_steps: u32,
+    /// Refine the Jacobian online (Broyden).
+    pub broyden: bool,
+    /// A gripper mark's parallax may leave the epipolar direction by this much, px (plus
+    /// `max_across_ratio` of its length) before the servo calls a tracker wrong. The facet's
+    /// plane transfer is extrapolated a few facet heights up to the plate, and under real
+    /// perspective that leaves a systematic ~10 px across the epipolar lines.
+    pub max_across_px: f64,
+    pub max_across_ratio: f64,
+    /// Length that turns yaw into a distance for the servo's step metric, m: about the
+    /// distance of the marks from the reference point.
+    pub yaw_lever_m: f64,
+    /// Smallest accepted condition of the weighted Jacobian (see `ServoConfig`).
+    pub min_condition: f64,
+    /// Frames to wait after the arm arrives before measuring again.
+    pub settle_frames: u32,
+    /// Tool speed of servo moves, m/s.
+    pub speed_mps: f64,
+    /// Height of the tool point above the table (`grasp.table_z_m`) at the grasp, m.
+    pub grasp_height_m: f64,
+    /// Half-size of the local cage visited around the coarse approach pose, m: a local
+    /// affine model there takes out the perspective error of the global one (the global
+    /// model's image scale is that of the cage, ~10 % off near the target). 0 = skip.
+    pub local_cage_m: f64,
+    /// The servo's goal is this far above the grasp pose (the open-loop approach comes down
+    /// by it), m.
+    pub standoff_above_m: f64,
+    pub timeout_s: f64,
+}
+
+impl Default for ServoSettings {
+    fn default() -> Self {
+        Self {
+            gain: 0.5,
+            max_step_m: 0.03,
+            max_yaw_step_deg: 8.0,
+            converged_m: 0.0005,
+            converged_deg: 0.3,
+            converged_steps: 3,
+            max_steps: 60,
+            broyden: false,
+            max_across_px: 25.0,
+            max_across_ratio: 0.3,
+            yaw_lever_m: 0.025,
+            min_condition: 0.02,
+            settle_frames: 2,
+            speed_mps: 0.08,
+            grasp_height_m: 0.010,
+            local_cage_m: 0.0,
+            standoff_above_m: 0.06,
+            timeout_s: 90.0,
+        }
+    }
+}
+
+/// The open-loop grasp and lift.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraspConfig {
+    /// Height of the table top in robot coordinates, m (measured like the cage): the grasp
+    /// comes down to `servo.grasp_height_m` above it by the robot's own kinematics.
+    pub table_z_m: f64,
+    pub approach_speed_mps: f64,
+    /// Time the jaws get to close and settle, s.
+    pub close_s: f64,
+    pub lift_m: f64,
+    pub lift_speed_mps: f64,
+    /// Jaws closer than this after closing hold nothing, m.
+    pub min_grip_width_m: f64,
+    pub timeout_s: f64,
+}
+
+impl Default for GraspConfig {
+    fn default() -> Self {
+        Self { table_z_m: 0.0, approach_speed_mps: 0.04, close_s: 0.8, lift_m: 0.07, lift_speed_mps: 0.05, min_grip_width_m: 0.005, timeout_s: 20.0 }
+    }
+}
+
+/// What makes the daemon stop the arm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetyConfig {
+    /// The tool must stay inside this box, robot frame, m (a reading outside makes no sense).
+    pub workspace_min_m: [f64; 3],
+    pub workspace_max_m: [f64; 3],
+    /// Largest believable tool jump between two consecutive state readings, m.
+    pub max_state_jump_m: f64,
+    /// Stop when no robot state arrives for this many frames.
+    pub state_stale_frames: u32,
+    /// In phases that need a tracker, a confidence score below this counts as lost.
+    pub min_tracker_score: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            workspace_min_m: [-0.8, -0.8, -0.01],
+            workspace_max_m: [0.8, 0.8, 0.8],
+            max_state_jump_m: 0.05,
+            state_stale_frames: 6,
+            min_tracker_score: 0.6,
+        }
+    }
+}
+
+/// Tracker settings the daemon overrides (the rest are `TrackerConfig`'s defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackerSettings {
+    pub points: usize,
+    pub search_px: f64,
+    pub min_contrast: i32,
+    /// Let the contours follow perspective (a homography) instead of an affine map (A.2).
+    /// On by default: the affine contour on the small, low-contrast cube face collapsed
+    /// while the arm moved nearby; the servo takes the local affine frame at the centre.
+    pub projective: bool,
+    /// Velocity gain of the target contours' shape prediction. 0 by default: the target
+    /// stands still, and a face edge with almost no contrast against the table (the cube's
+    /// front face in `pick_cube`) otherwise drifts away at the speed the filter once saw.
+    pub target_deformation_velocity_gain: f64,
+}
+
+impl Default for TrackerSettings {
+    fn default() -> Self {
+        Self { points: 100, search_px: 12.0, min_contrast: 12, projective: true, target_deformation_velocity_gain: 0.0 }
+    }
+}
+
+impl DaemonConfig {
+    /// The configuration of the plate's contours.
+    pub fn plate_tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
+        let base = self.tracker.tracker_config();
+        if self.gripper.plate_bright_inside {
+            handeye_vision::tracker::TrackerConfig {
+                edge_sign: handeye_vision::tracker::EdgeSign::Fixed(handeye_vision::tracker::Polarity::BrightInside),
+                ..base
+            }
+        } else {
+            base
+        }
+    }
+}
+
+impl TrackerSettings {
+    /// The configuration of the target's contours.
+    pub fn target_tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
+        handeye_vision::tracker::TrackerConfig { deformation_velocity_gain: self.target_deformation_velocity_gain, ..self.tracker_config() }
+    }
+
+    pub fn tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
+        handeye_vision::tracker::TrackerConfig {
+            points: self.points,
+            search_px: self.search_px,
+            min_contrast: self.min_contrast,
+            model: if self.projective {
+                handeye_vision::tracker::DeformationModel::Projective
+            } else {
+                handeye_vision::tracker::DeformationModel::NormalOnly
+            },
+            ..Default::default()
+        }
+    }
+}
+
+impl DaemonConfig {
+    /// Reads and checks a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { file: path.to_path_buf(), source })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and checks TOML text; `file` names it in errors.
+    pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        let cfg: Self = toml::from_str(text).map_err(|e| ConfigError::Parse { file: file.to_path_buf(), message: e.to_string() })?;
+        cfg.validate(file)?;
+        Ok(cfg)
+    }
+
+    /// The configuration as TOML (what `handeye run` writes for the daemon).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Checks every value; the error names the first bad field.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let bad = |field: &'static str, value: String, expected: &'static str| {
+            Err(ConfigError::Invalid { file: file.to_path_buf(), field, value, expected })
+        };
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        if !pos(self.frame_rate_hz) {
+            return bad("frame_rate_hz", self.frame_rate_hz.to_string(), "> 0");
+        }
+        if self.stale_frame_ms == 0 {
+            return bad("stale_frame_ms", "0".into(), ">= 1");
+        }
+        for (field, v) in [
+            ("start_timeout_s", self.start_timeout_s),
+            ("calibration.speed_mps", self.calibration.speed_mps),
+            ("calibration.max_residual_px", self.calibration.max_residual_px),
+            ("calibration.max_epipolar_px", self.calibration.max_epipolar_px),
+            ("calibration.point_timeout_s", self.calibration.point_timeout_s),
+            ("acquire.timeout_s", self.acquire.timeout_s),
+            ("target.timeout_s", self.target.timeout_s),
+            ("servo.max_step_m", self.servo.max_step_m),
+            ("servo.speed_mps", self.servo.speed_mps),
+            ("servo.timeout_s", self.servo.timeout_s),
+            ("grasp.approach_speed_mps", self.grasp.approach_speed_mps),
+            ("grasp.lift_speed_mps", self.grasp.lift_speed_mps),
+            ("grasp.timeout_s", self.grasp.timeout_s),
+            ("gripper.max_opening_m", self.gripper.max_opening_m),
+            ("safety.max_state_jump_m", self.safety.max_state_jump_m),
+        ] {
+            if !pos(v) {
+                return bad(field, v.to_string(), "a finite number > 0");
+            }
+        }
+        if !(self.done_hold_s.is_finite() && self.done_hold_s >= 0.0) {
+            return bad("done_hold_s", self.done_hold_s.to_string(), ">= 0");
+        }
+        if !(self.servo.gain > 0.0 && self.servo.gain < 1.0) {
+            return bad("servo.gain", self.servo.gain.to_string(), "0 < gain < 1");
+        }
+        if self.calibration.cage_m.len() < 4 {
+            return bad("calibration.cage_m", format!("{} points", self.calibration.cage_m.len()), "at least 4 non-coplanar points");
+        }
+        if self.calibration.cage_m.iter().flatten().any(|v| !v.is_finite()) {
+            return bad("calibration.cage_m", "non-finite".into(), "finite coordinates");
+        }
+        if !(self.calibration.park_m.is_empty() || self.calibration.park_m.len() == 3) {
+            return bad("calibration.park_m", format!("{:?}", self.calibration.park_m), "empty or [x, y, z]");
+        }
+        if self.calibration.samples == 0 {
+            return bad("calibration.samples", "0".into(), ">= 1");
+        }
+        let g = &self.gripper;
+        let c = &g.plate_corners_m;
+        let area = (c[1][0] - c[0][0]) * (c[3][1] - c[0][1]) - (c[1][1] - c[0][1]) * (c[3][0] - c[0][0]);
+        if !area.is_finite() || area.abs() < 1e-6 {
+            return bad("gripper.plate_corners_m", format!("{c:?}"), "a parallelogram of at least 1 cm²");
+        }
+        let m = &g.marks_m;
+        let marks_area = (m[1][0] - m[0][0]) * (m[2][1] - m[0][1]) - (m[1][1] - m[0][1]) * (m[2][0] - m[0][0]);
+        if !marks_area.is_finite() || marks_area.abs() < 1e-5 {
+            return bad("gripper.marks_m", format!("{m:?}"), "three non-collinear points spread over the plate");
+        }
+        if g.tool_from_reference_m.iter().chain(&g.reference_m).any(|v| !v.is_finite()) {
+            return bad("gripper.tool_from_reference_m", format!("{:?}", g.tool_from_reference_m), "finite");
+        }
+        if !(1..=16).contains(&self.servo.converged_steps) {
+            return bad("servo.converged_steps", self.servo.converged_steps.to_string(), "1..=16");
+        }
+        if self.servo.max_steps == 0 {
+            return bad("servo.max_steps", "0".into(), ">= 1");
+        }
+        if !(self.servo.standoff_above_m.is_finite() && self.servo.standoff_above_m >= 0.0) {
+            return bad("servo.standoff_above_m", self.servo.standoff_above_m.to_string(), ">= 0");
+        }
+        if self.tracker.tracker_config().validate().is_err() || self.tracker.target_tracker_config().validate().is_err() {
+            return bad("tracker", format!("{:?}", self.tracker), "valid tracker settings (points 12..=4096, search_px 1..=40, min_contrast 1..=255)");
+        }
+        if (0..3).any(|i| self.safety.workspace_min_m[i] >= self.safety.workspace_max_m[i]) {
+            return bad("safety.workspace_min_m", format!("{:?}", self.safety.workspace_min_m), "below workspace_max_m on every axis");
+        }
+        Ok(())
+    }
+
+    /// Seconds → frames at the nominal rate (at least 1).
+    pub fn frames(&self, seconds: f64) -> u64 {
+        (seconds * self.frame_rate_hz).ceil().max(1.0) as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_round_trip_through_toml() {
+        let cfg = DaemonConfig::default();
+        cfg.validate(Path::new("x")).unwrap();
+        let back = DaemonConfig::parse(&cfg.to_toml(), Path::new("x")).unwrap();
+        assert_eq!(back, cfg);
+    }
+
+    #[test]
+    fn bad_values_name_the_file_and_field() {
+        let err = DaemonConfig::parse("[servo]\ngain = 1.5\n", Path::new("my.toml")).unwrap_err().to_string();
+        assert!(err.contains("my.toml") && err.contains("servo.gain"), "{err}");
+        let err = DaemonConfig::parse("[calibration]\ncage_m = [[0.1, 0.2, 0.3]]\n", Path::new("c.toml")).unwrap_err().to_string();
+        assert!(err.contains("calibration.cage_m"), "{err}");
+        let err = DaemonConfig::parse("[gripper]\nmarks_m = [[0.0, 0.0], [0.01, 0.0], [0.02, 0.0]]\n", Path::new("g.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("gripper.marks_m"), "{err}");
+        let err = DaemonConfig::parse("frame_rate_hz = \"fast\"\n", Path::new("f.toml")).unwrap_err().to_string();
+        assert!(err.contains("f.toml") && err.contains("frame_rate_hz"), "{err}");
+    }
+}

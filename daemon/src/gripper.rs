@@ -1,0 +1,376 @@
+//! The gripper as the daemon sees it: the plate model from the configuration in the
+//! tracker's template coordinates (marks, reference point, axis), finding the plate in an
+//! image once the moving fingers have been located, and turning the plate and target
+//! trackers into the servo's [`GripperView`] and [`StereoFrame`].
+
+use handeye_vision::image::ImageView;
+use handeye_vision::locate::Motion;
+use handeye_vision::servo::{AffineFrame, GripperView, StereoFrame, StereoPoint};
+use handeye_vision::tracker::ContourTracker;
+use nalgebra::Vector2;
+
+use crate::config::GripperModel;
+
+/// The plate model in the template coordinates of a tracker built from the plate's image
+/// polygon (corners in the model's order): `e1` runs from corner 0 to corner 1, `e2` from
+/// corner 0 to corner 3, the origin at the centre, so the corners sit at `(±½, ±½)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlateTemplate {
+    pub marks_st: [[f64; 2]; 3],
+    pub reference_st: [f64; 2],
+    /// Template displacement of 1 m along the plate's `a` axis.
+    pub a_axis_st: [f64; 2],
+    /// Template displacement of 1 m along the plate's `b` axis (up).
+    pub b_axis_st: [f64; 2],
+}
+
+impl PlateTemplate {
+    pub fn new(model: &GripperModel) -> Self {
+        let c = model.plate_corners_m;
+        let o = [(c[0][0] + c[2][0]) / 2.0, (c[0][1] + c[2][1]) / 2.0];
+        let e1 = [c[1][0] - c[0][0], c[1][1] - c[0][1]];
+        let e2 = [c[3][0] - c[0][0], c[3][1] - c[0][1]];
+        let det = e1[0] * e2[1] - e1[1] * e2[0];
+        // (s, t) of a plate displacement d: solve d = s e1 + t e2.
+        let dir = |d: [f64; 2]| [(d[0] * e2[1] - d[1] * e2[0]) / det, (e1[0] * d[1] - e1[1] * d[0]) / det];
+        let at = |p: [f64; 2]| dir([p[0] - o[0], p[1] - o[1]]);
+        Self {
+            marks_st: model.marks_m.map(at),
+            reference_st: at(model.reference_m),
+            a_axis_st: dir([1.0, 0.0]),
+            b_axis_st: dir([0.0, 1.0]),
+        }
+    }
+}
+
+fn v2(p: [f64; 2]) -> Vector2<f64> {
+    Vector2::new(p[0], p[1])
+}
+
+fn arr(v: Vector2<f64>) -> [f64; 2] {
+    [v.x, v.y]
+}
+
+/// Where template point `st` is in the image.
+fn at(t: &ContourTracker, st: [f64; 2]) -> [f64; 2] {
+    arr(t.image_from_template(v2(st)))
+}
+
+/// Image displacement of template direction `d` around `st` (central difference of the
+/// placement, so a projective placement gives its local derivative).
+fn direction(t: &ContourTracker, st: [f64; 2], d: [f64; 2], scale: f64) -> [f64; 2] {
+    let h = [d[0] * scale, d[1] * scale];
+    let a = t.image_from_template(Vector2::new(st[0] + h[0], st[1] + h[1]));
+    let b = t.image_from_template(Vector2::new(st[0] - h[0], st[1] - h[1]));
+    arr((a - b) / (2.0 * scale))
+}
+
+/// The servo's view of the gripper from the two plate trackers: marks, reference point and
+/// the plate's `a` axis (per metre of plate, in pixels).
+pub fn gripper_view(plate: &PlateTemplate, left: &ContourTracker, right: &ContourTracker) -> GripperView {
+    let pair = |st: [f64; 2]| StereoPoint { left: at(left, st), right: at(right, st) };
+    // Half a centimetre either side keeps the difference inside the plate.
+    let scale = 0.005;
+    GripperView {
+        marks: plate.marks_st.map(pair),
+        reference: pair(plate.reference_st),
+        axis: StereoPoint {
+            left: direction(left, plate.reference_st, plate.a_axis_st, scale),
+            right: direction(right, plate.reference_st, plate.a_axis_st, scale),
+        },
+    }
+}
+
+/// A facet's affine frame in one view from its tracker: the least-squares affine map from
+/// the template's corners to where the tracker puts them in the image (origin = the image of
+/// the template origin). Over the whole outline, this is steadier than the placement's local
+/// derivative at the centre, and the plane transfer the servo builds from the two views'
+/// frames is extrapolated far (to the gripper plate), so its steadiness is what counts.
+/// No allocation (corners are accumulated on the fly).
+pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
+    // Normal equations of p = o + E q over the corners, centred.
+    let (mut n, mut qm, mut pm) = (0.0, Vector2::zeros(), Vector2::zeros());
+    for (q, p) in t.template().corners().iter().zip(t.corners()) {
+        n += 1.0;
+        qm += q;
+        pm += p;
+    }
+    if n < 3.0 {
+        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+    }
+    qm /= n;
+    pm /= n;
+    let (mut qq, mut pq) = (nalgebra::Matrix2::zeros(), nalgebra::Matrix2::zeros());
+    for (q, p) in t.template().corners().iter().zip(t.corners()) {
+        let (dq, dp) = (q - qm, p - pm);
+        qq += dq * dq.transpose();
+        pq += dp * dq.transpose();
+    }
+    let Some(inv) = qq.try_inverse() else {
+        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+    };
+    let e = pq * inv;
+    let o = pm - e * qm;
+    AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] }
+}
+
+pub fn stereo_frame(left: &ContourTracker, right: &ContourTracker) -> StereoFrame {
+    StereoFrame { left: facet_frame(left), right: facet_frame(right) }
+}
+
+/// Why the plate was not found next to the moving fingers.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlateError {
+    #[error("no bright plate-shaped region above the moving fingers (window {window:?}, threshold {threshold})")]
+    NotFound { window: [usize; 4], threshold: u8 },
+    #[error("nothing moved")]
+    NoMotion,
+}
+
+/// Finds the plate's light rectangle above the moving fingers in `image` (a frame with the
+/// arm still): Otsu threshold in a window above the fingers, the bright connected regions
+/// that do not touch the window's edge (the plate's dark border encloses its light
+/// rectangle), the largest fairly rectangular one above the fingers. Returns its corners,
+/// top-left, top-right, bottom-right, bottom-left (the extreme points along the diagonals,
+/// pushed half a pixel out to the region's boundary). Allocates: run it off the hard loop.
+pub fn find_plate(image: &ImageView<'_>, motion: &Motion) -> Result<[[f64; 2]; 4], PlateError> {
+    if motion.blobs.is_empty() {
+        return Err(PlateError::NoMotion);
+    }
+    let mut bb = [usize::MAX, usize::MAX, 0, 0];
+    for b in &motion.blobs {
+        bb = [bb[0].min(b.bbox[0]), bb[1].min(b.bbox[1]), bb[2].max(b.bbox[2]), bb[3].max(b.bbox[3])];
+    }
+    let (w, h) = (bb[2] - bb[0] + 1, bb[3] - bb[1] + 1);
+    let size = w.max(h);
+    let x0 = bb[0].saturating_sub(size);
+    let x1 = (bb[2] + size).min(image.width() - 1);
+    let y0 = bb[1].saturating_sub(size + 40);
+    let y1 = (bb[1] + h / 2).min(image.height() - 1);
+    let (ww, wh) = (x1 - x0 + 1, y1 - y0 + 1);
+    let mut hist = [0usize; 256];
+    for y in y0..=y1 {
+        for &p in &image.row(y)[x0..=x1] {
+            hist[p as usize] += 1;
+        }
+    }
+    let threshold = otsu(&hist);
+    let window = [x0, y0, x1, y1];
+    // 4-connected regions of bright pixels in the window.
+    let mut label = vec![u32::MAX; ww * wh];
+    let bright = |x: usize, y: usize| image.get(x0 + x, y0 + y) > threshold;
+    let mut best: Option<(usize, Vec<(usize, usize)>)> = None;
+    let mut stack = Vec::new();
+    let blob_cy = motion.placement.centre_px[1];
+    for sy in 0..wh {
+        for sx in 0..ww {
+            if label[sy * ww + sx] != u32::MAX || !bright(sx, sy) {
+                continue;
+            }
+            let mut pixels = Vec::new();
+            let mut touches = false;
+            label[sy * ww + sx] = 0;
+            stack.push((sx, sy));
+            while let Some((x, y)) = stack.pop() {
+                pixels.push((x, y));
+                touches |= x == 0 || y == 0 || x == ww - 1 || y == wh - 1;
+                let mut visit = |nx: usize, ny: usize| {
+                    if label[ny * ww + nx] == u32::MAX && bright(nx, ny) {
+                        label[ny * ww + nx] = 0;
+                        stack.push((nx, ny));
+                    }
+                };
+                if x > 0 {
+                    visit(x - 1, y);
+                }
+                if x + 1 < ww {
+                    visit(x + 1, y);
+                }
+                if y > 0 {
+                    visit(x, y - 1);
+                }
+                if y + 1 < wh {
+                    visit(x, y + 1);
+                }
+            }
+            if touches || pixels.len() < 60 {
+                continue;
+            }
+            let (mut bx0, mut by0, mut bx1, mut by1) = (usize::MAX, usize::MAX, 0, 0);
+            let mut cy = 0.0;
+            for &(x, y) in &pixels {
+                bx0 = bx0.min(x);
+                by0 = by0.min(y);
+                bx1 = bx1.max(x);
+                by1 = by1.max(y);
+                cy += y as f64;
+            }
+            cy = cy / pixels.len() as f64 + y0 as f64;
+            let fill = pixels.len() as f64 / ((bx1 - bx0 + 1) * (by1 - by0 + 1)) as f64;
+            if fill < 0.55 || cy > blob_cy {
+                continue;
+            }
+            if best.as_ref().is_none_or(|b| pixels.len() > b.0) {
+                best = Some((pixels.len(), pixels));
+            }
+        }
+    }
+    let Some((_, pixels)) = best else { return Err(PlateError::NotFound { window, threshold }) };
+    let extreme = |f: &dyn Fn(f64, f64) -> f64| {
+        let mut arg = (0.0, 0.0);
+        let mut val = f64::NEG_INFINITY;
+        for &(x, y) in &pixels {
+            let (u, v) = ((x0 + x) as f64, (y0 + y) as f64);
+            let s = f(u, v);
+            if s > val {
+                val = s;
+                arg = (u, v);
+            }
+        }
+        arg
+    };
+    let tl = extreme(&|u, v| -u - v);
+    let tr = extreme(&|u, v| u - v);
+    let br = extreme(&|u, v| u + v);
+    let bl = extreme(&|u, v| -u + v);
+    let out = |p: (f64, f64), su: f64, sv: f64| [p.0 + 0.5 * su, p.1 + 0.5 * sv];
+    Ok([out(tl, -1.0, -1.0), out(tr, 1.0, -1.0), out(br, 1.0, 1.0), out(bl, -1.0, 1.0)])
+}
+
+/// Otsu's threshold of a grey-level histogram.
+fn otsu(hist: &[usize; 256]) -> u8 {
+    let total: f64 = hist.iter().sum::<usize>() as f64;
+    let sum: f64 = hist.iter().enumerate().map(|(i, &c)| i as f64 * c as f64).sum();
+    let (mut w0, mut sum0, mut best, mut best_t) = (0.0, 0.0, -1.0, 0u8);
+    for (t, &c) in hist.iter().enumerate() {
+        w0 += c as f64;
+        sum0 += t as f64 * c as f64;
+        let w1 = total - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let (m0, m1) = (sum0 / w0, (sum - sum0) / w1);
+        let between = w0 * w1 * (m0 - m1) * (m0 - m1);
+        if between > best {
+            best = between;
+            best_t = t as u8;
+        }
+    }
+    best_t
+}
+
+/// Corners of a polygon refined from the tracker's last edges: each inlier edge point is
+/// assigned to the nearest side of the tracked outline, a line is fitted to each side (total
+/// least squares), and adjacent lines are intersected. A template built from a clicked or
+/// coarsely found polygon keeps that polygon's shape errors (an operator's ±3 px on a
+/// 30 px facet); refining the corners from the image and restarting the tracker removes
+/// them. `None` when a side has too few edges or lines are near parallel. Allocates (once
+/// per refinement, while acquiring).
+pub fn refine_polygon(t: &ContourTracker) -> Option<Vec<[f64; 2]>> {
+    let corners: Vec<Vector2<f64>> = t.corners().collect();
+    let k = corners.len();
+    if k < 3 {
+        return None;
+    }
+    let mut sides: Vec<Vec<Vector2<f64>>> = vec![Vec::new(); k];
+    for e in t.inlier_edges() {
+        let mut best = (f64::INFINITY, 0);
+        for j in 0..k {
+            let (a, b) = (corners[j], corners[(j + 1) % k]);
+            let ab = b - a;
+            let f = ((e - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+            let d = (a + ab * f - e).norm();
+            if d < best.0 {
+                best = (d, j);
+            }
+        }
+        sides[best.1].push(e);
+    }
+    // Each side as (point, unit direction).
+    let mut lines = Vec::with_capacity(k);
+    for pts in &sides {
+        if pts.len() < 5 {
+            return None;
+        }
+        let c = pts.iter().sum::<Vector2<f64>>() / pts.len() as f64;
+        let mut s = nalgebra::Matrix2::zeros();
+        for p in pts {
+            let d = p - c;
+            s += d * d.transpose();
+        }
+        let eig = s.symmetric_eigen();
+        let i = if eig.eigenvalues[0] > eig.eigenvalues[1] { 0 } else { 1 };
+        lines.push((c, eig.eigenvectors.column(i).into_owned()));
+    }
+    let mut out = Vec::with_capacity(k);
+    for j in 0..k {
+        let (p, u) = lines[(j + k - 1) % k];
+        let (q, v) = lines[j];
+        // p + s u = q + r v
+        let det = u.x * (-v.y) - u.y * (-v.x);
+        if det.abs() < 0.1 {
+            return None;
+        }
+        let w = q - p;
+        let s = (w.x * (-v.y) - w.y * (-v.x)) / det;
+        let x = p + u * s;
+        // A refined corner far from the tracked one means a side latched onto something else.
+        if (x - corners[j]).norm() > 8.0 {
+            return None;
+        }
+        out.push([x.x, x.y]);
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::locate::{Blob, Placement};
+
+    #[test]
+    fn template_coordinates_of_the_default_plate() {
+        let p = PlateTemplate::new(&GripperModel::default());
+        // Reference at the centre; corners at (±½, ±½): a mark at (a, b) = (-0.016, 0.018)
+        // is left (s < 0) and up (t < 0, since e2 runs from the top-left corner down).
+        assert!(p.reference_st[0].abs() < 1e-12 && p.reference_st[1].abs() < 1e-12);
+        assert!((p.marks_st[0][0] + 0.016 / 0.042).abs() < 1e-9, "{:?}", p.marks_st);
+        assert!((p.marks_st[0][1] + 0.018 / 0.046).abs() < 1e-9, "{:?}", p.marks_st);
+        assert!((p.a_axis_st[0] - 1.0 / 0.042).abs() < 1e-9 && p.a_axis_st[1].abs() < 1e-12);
+        assert!((p.b_axis_st[1] + 1.0 / 0.046).abs() < 1e-9);
+    }
+
+    #[test]
+    fn finds_a_bordered_plate_above_the_moving_region() {
+        // Table grey 110; plate: dark border (10) around a light rectangle (170) at
+        // x 100..140, y 40..90; fingers (moving) below it at y 100..160.
+        let mut img = ImageBuf::filled(320, 240, 110);
+        for y in 32..98 {
+            for x in 92..148 {
+                img.set(x, y, 10);
+            }
+        }
+        for y in 40..90 {
+            for x in 100..140 {
+                img.set(x, y, 170);
+            }
+        }
+        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
+        let motion = Motion {
+            blobs: vec![blob],
+            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
+            threshold: 12,
+            noise_sigma: 1.0,
+            dropped: 0,
+        };
+        let c = find_plate(&img.view(), &motion).unwrap();
+        let want = [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]];
+        for (got, want) in c.iter().zip(want) {
+            assert!((got[0] - want[0]).abs() < 1e-9 && (got[1] - want[1]).abs() < 1e-9, "{c:?}");
+        }
+        // No plate: nothing enclosed above the fingers.
+        let blank = ImageBuf::filled(320, 240, 110);
+        assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
+    }
+}

@@ -1,0 +1,336 @@
+//! The hard loop's per-frame work, without I/O: update the trackers over the frame's pixels
+//! in place, run the safety checks and the current phase, and produce exactly one command
+//! (stamped with the frame's id; `Hold` when there is nothing to do) and one telemetry
+//! sample. [`crate::service`] wraps it in the shared-memory transport; tests drive it
+//! in-process.
+//!
+//! Everything is allocated up front: in the servo's steady state a cycle allocates nothing
+//! (`tests/daemon_inprocess.rs` counts). The exceptions are the moments that are meant to:
+//! copying the open/closed frames when locating the gripper, building trackers and the servo
+//! on entering a phase, and the failure text.
+
+use handeye_vision::image::ImageView;
+use handeye_vision::tracker::{Role, StereoStates, View};
+use handeye_wire::{
+    monotonic_ns, robot_flags, Phase, RobotCommand, RobotState, Telemetry, NO_FRAME, TELEMETRY_CORNERS, WIRE_VERSION,
+};
+
+use crate::config::DaemonConfig;
+use crate::hint::OperatorHint;
+use crate::outcome::DaemonOutcome;
+use crate::phase::{acquire_gripper::AcquireGripper, Cmd, Cycle, Mission, PhaseState, Step};
+use crate::recovery::RecoveryStep;
+use crate::safety::{check_robot, check_trackers};
+
+/// The view whose gripper and target trackers are both lost (or unsure) while the other
+/// view tracks both confidently.
+fn moved_view(states: &StereoStates, trackers: &handeye_vision::tracker::StereoTrackerSet, min_score: f64) -> Option<View> {
+    let ok = |r: Role, v: View| {
+        matches!(states.get(r, v), Some(s) if s.is_tracking()) && trackers.get(r, v).is_some_and(|t| t.confidence().score >= min_score)
+    };
+    [View::Left, View::Right].into_iter().find(|&v| {
+        let other = if v == View::Left { View::Right } else { View::Left };
+        !ok(Role::Gripper, v) && !ok(Role::Target, v) && ok(Role::Gripper, other) && ok(Role::Target, other)
+    })
+}
+use crate::timing::LatencyHistogram;
+
+/// The daemon's state between frames.
+pub struct HardLoop {
+    pub mission: Mission,
+    pub phase: PhaseState,
+    timing: LatencyHistogram,
+    seq: u64,
+    frames: u64,
+    last_frame_id: Option<u64>,
+    robot: Option<RobotState>,
+    robot_frame: u64,
+    robot_states: u64,
+    rejected_seq: Option<u64>,
+    /// Furthest working phase entered.
+    phase_reached: Phase,
+    failure: Option<String>,
+    command: RobotCommand,
+    telemetry: Telemetry,
+    stopped_at_frame: Option<u64>,
+    /// Re-acquiring one view after its camera moved (servo only).
+    recovery: Option<crate::recovery::Recovery>,
+    /// Camera knocks recovered from.
+    pub recoveries: u32,
+}
+
+impl HardLoop {
+    pub fn new(cfg: DaemonConfig, hint: Option<OperatorHint>) -> std::io::Result<Self> {
+        let deadline_ns = cfg.deadline_us * 1000;
+        Ok(Self {
+            mission: Mission::new(cfg, hint)?,
+            phase: PhaseState::AcquireGripper(AcquireGripper::new(0)),
+            timing: LatencyHistogram::new(deadline_ns),
+            seq: 0,
+            frames: 0,
+            last_frame_id: None,
+            robot: None,
+            robot_frame: 0,
+            robot_states: 0,
+            rejected_seq: None,
+            phase_reached: Phase::AcquireGripper,
+            failure: None,
+            command: RobotCommand::default(),
+            telemetry: Telemetry::default(),
+            stopped_at_frame: None,
+            recovery: None,
+            recoveries: 0,
+        })
+    }
+
+    /// One robot state sample (the transport drains them all before each cycle). A reading
+    /// that makes no sense stops the arm at the next cycle.
+    pub fn robot_state(&mut self, s: &RobotState) {
+        if s.flags & robot_flags::REJECTED != 0 {
+            self.rejected_seq = Some(s.last_command_seq);
+        }
+        if self.failure.is_none()
+            && let Err(reason) = check_robot(&self.mission.cfg.safety, self.robot.as_ref(), s)
+        {
+            self.stop_reason(Phase::Stopped, reason);
+        }
+        if self.mission.start_pose.is_none() {
+            self.mission.start_pose = Some((s.tool_pos_m.map(f64::from), f64::from(s.tool_yaw_rad)));
+        }
+        self.robot = Some(*s);
+        self.robot_frame = self.frames;
+        self.robot_states += 1;
+    }
+
+    fn stop_reason(&mut self, phase: Phase, reason: String) {
+        tracing::warn!(phase = phase.name(), %reason, "arm stopped");
+        self.failure = Some(reason);
+        self.phase = if phase == Phase::Failed { PhaseState::Failed } else { PhaseState::Stopped };
+        self.mission.snapshot = Some(if phase == Phase::Failed { "failed" } else { "stopped" });
+    }
+
+    /// Processes one stereo frame and returns the command answering it. Call
+    /// [`Self::finish_cycle`] with the cycle's duration before publishing the telemetry.
+    pub fn cycle(&mut self, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> &RobotCommand {
+        let frame_index = self.frames;
+        self.frames += 1;
+        let gap = self.last_frame_id.map_or(1, |last| frame_id.saturating_sub(last).max(1));
+        self.last_frame_id = Some(frame_id);
+        let dt_s = gap as f64 / self.mission.cfg.frame_rate_hz;
+        let states = self.mission.trackers.update(left, right, dt_s);
+        let cmd = self.decide(frame_index, frame_id, left, right, states);
+        let phase = self.phase.phase();
+        if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
+            self.phase_reached = phase;
+        }
+        // The first cycle after the run failed or stopped stops the arm explicitly.
+        let cmd = if matches!(phase, Phase::Failed | Phase::Stopped) && self.stopped_at_frame.is_none() {
+            self.stopped_at_frame = Some(frame_id);
+            Cmd::STOP
+        } else {
+            cmd
+        };
+        self.command = self.stamp(&cmd, frame_id);
+        self.fill_telemetry(frame_id, &states);
+        &self.command
+    }
+
+    fn decide(&mut self, frame_index: u64, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
+        if self.phase.is_terminal() {
+            return Cmd::HOLD;
+        }
+        let Some(robot) = self.robot else {
+            if frame_index >= u64::from(self.mission.cfg.safety.state_stale_frames) {
+                self.stop_reason(Phase::Stopped, "no robot state received".into());
+            }
+            return Cmd::HOLD;
+        };
+        if frame_index.saturating_sub(self.robot_frame) > u64::from(self.mission.cfg.safety.state_stale_frames) {
+            self.stop_reason(Phase::Stopped, format!("no robot state for {} frames", frame_index - self.robot_frame));
+            return Cmd::STOP;
+        }
+        let phase = self.phase.phase();
+        if let Some(rec) = self.recovery.as_mut() {
+            let other = if rec.view == View::Left { View::Right } else { View::Left };
+            let other_tracking = [Role::Gripper, Role::Target].iter().all(|&r| matches!(states.get(r, other), Some(s) if s.is_tracking()));
+            let image = if rec.view == View::Left { left } else { right };
+            match rec.step(&mut self.mission.trackers, image, other_tracking) {
+                RecoveryStep::Searching => return Cmd::HOLD,
+                RecoveryStep::Recovered { shift_px } => {
+                    tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
+                    self.recoveries += 1;
+                    self.mission.snapshot = Some("reacquired");
+                    let view = rec.view;
+                    if let PhaseState::Servo(p) = &mut self.phase {
+                        p.resume(&mut self.mission, view, shift_px);
+                    }
+                    self.recovery = None;
+                    return Cmd::HOLD;
+                }
+                RecoveryStep::Failed(reason) => {
+                    self.recovery = None;
+                    self.stop_reason(Phase::Stopped, format!("camera moved, trackers not re-acquired: {reason}"));
+                    return Cmd::STOP;
+                }
+            }
+        }
+        if let Err(reason) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
+            // Both trackers of one view lost while the other view holds both: that camera
+            // moved. Stop the arm and try to re-acquire (servo only; elsewhere, stop).
+            if phase == Phase::Servo
+                && let Some(view) = moved_view(&states, &self.mission.trackers, self.mission.cfg.safety.min_tracker_score)
+                && let Some(rec) = crate::recovery::Recovery::start(&self.mission.trackers, view, frame_index)
+            {
+                tracing::warn!(?view, %reason, "a camera seems to have moved: stopping and re-acquiring");
+                self.recovery = Some(rec);
+                self.mission.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
+                self.mission.snapshot = Some("camera_moved");
+                return Cmd::STOP;
+            }
+            self.stop_reason(Phase::Stopped, reason);
+            return Cmd::STOP;
+        }
+        let cycle = Cycle { frame_index, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
+        match self.phase.step(&mut self.mission, &cycle) {
+            Step::Stay(c) | Step::Next(c) => c,
+            Step::Fail(reason) => {
+                self.stop_reason(Phase::Failed, reason);
+                Cmd::STOP
+            }
+        }
+    }
+
+    fn stamp(&mut self, c: &Cmd, frame_id: u64) -> RobotCommand {
+        self.seq += 1;
+        let f = |x: f64| if x.is_finite() { x as f32 } else { 0.0 };
+        RobotCommand {
+            version: WIRE_VERSION,
+            kind: c.kind as u32,
+            seq: self.seq,
+            frame_id,
+            time_ns: monotonic_ns(),
+            target_m: c.target_m.map(f),
+            yaw_rad: f(c.yaw_rad),
+            speed_limit_mps: f(c.speed_mps).max(0.0),
+            gripper: c.gripper as u32,
+        }
+    }
+
+    fn fill_telemetry(&mut self, frame_id: u64, states: &StereoStates) {
+        let t = &mut self.telemetry;
+        let phase = self.phase.phase();
+        t.phase = phase as u32;
+        t.frame_id = frame_id;
+        for (i, (role, view)) in
+            [(Role::Gripper, View::Left), (Role::Gripper, View::Right), (Role::Target, View::Left), (Role::Target, View::Right)]
+                .into_iter()
+                .enumerate()
+        {
+            t.tracker_corners_px[i] = [[f32::NAN; 2]; TELEMETRY_CORNERS];
+            match self.mission.trackers.get(role, view) {
+                Some(tr) => {
+                    t.tracker_updates[i] = tr.update_count();
+                    t.tracker_state[i] = match states.get(role, view) {
+                        Some(s) if s.is_tracking() => 1,
+                        Some(_) => 2,
+                        None if self.mission.trackers.is_active(role, view) => 1,
+                        None => 0,
+                    };
+                    let score = tr.confidence().score;
+                    t.tracker_confidence[i] = if score.is_finite() { score.clamp(0.0, 1.0) as f32 } else { 0.0 };
+                    for (k, c) in tr.corners().take(TELEMETRY_CORNERS).enumerate() {
+                        if c.x.is_finite() && c.y.is_finite() {
+                            t.tracker_corners_px[i][k] = [c.x as f32, c.y as f32];
+                        }
+                    }
+                }
+                None => {
+                    t.tracker_state[i] = 0;
+                    t.tracker_confidence[i] = 0.0;
+                }
+            }
+        }
+        let in_servo = phase == Phase::Servo;
+        for (dst, src) in t.servo_error.iter_mut().zip(self.mission.servo_error) {
+            *dst = if in_servo && src.is_finite() { src as f32 } else { f32::NAN };
+        }
+        t.servo_steps = self.mission.servo_steps;
+        t.planning = u32::from(self.mission.worker.busy());
+        match &self.failure {
+            Some(reason) => t.set_reason(reason),
+            None => t.set_reason(&self.mission.status),
+        }
+    }
+
+    /// Records the cycle's duration (frame received → command about to be sent) and stamps
+    /// the telemetry with it; returns the telemetry to publish (before the command).
+    pub fn finish_cycle(&mut self, loop_ns: u64) -> &Telemetry {
+        self.timing.record_ns(loop_ns);
+        self.telemetry.loop_ns = loop_ns;
+        self.telemetry.deadline_misses = self.timing.deadline_misses();
+        self.telemetry.time_ns = monotonic_ns();
+        &self.telemetry
+    }
+
+    /// Stops the arm outside a frame (stale or vanished camera stream, interrupt): the
+    /// command (`Stop`, answering no frame) and the telemetry saying why.
+    pub fn safety_stop(&mut self, reason: &str) -> (RobotCommand, Telemetry) {
+        if !self.phase.is_terminal() {
+            self.stop_reason(Phase::Stopped, reason.to_string());
+        }
+        if self.stopped_at_frame.is_none() {
+            self.stopped_at_frame = Some(NO_FRAME);
+        }
+        let cmd = self.stamp(&Cmd::STOP, NO_FRAME);
+        let states = StereoStates::default();
+        self.fill_telemetry(NO_FRAME, &states);
+        self.telemetry.time_ns = monotonic_ns();
+        (cmd, self.telemetry)
+    }
+
+    /// Whether the run is over: failed or stopped, or done and held long enough.
+    pub fn finished(&self) -> bool {
+        match self.phase {
+            PhaseState::Failed | PhaseState::Stopped => true,
+            PhaseState::Done { since_frame } => self.frames.saturating_sub(since_frame) > self.mission.cfg.frames(self.mission.cfg.done_hold_s),
+            _ => false,
+        }
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.phase.phase()
+    }
+
+    pub fn telemetry(&self) -> &Telemetry {
+        &self.telemetry
+    }
+
+    pub fn timing(&self) -> &LatencyHistogram {
+        &self.timing
+    }
+
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// What happened, for `daemon.json`.
+    pub fn outcome(&self, wall_s: f64) -> DaemonOutcome {
+        DaemonOutcome::from_loop(self, wall_s)
+    }
+
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    pub fn phase_reached(&self) -> Phase {
+        self.phase_reached
+    }
+
+    pub fn stopped_at_frame(&self) -> Option<u64> {
+        self.stopped_at_frame
+    }
+
+    pub fn robot_states(&self) -> u64 {
+        self.robot_states
+    }
+}

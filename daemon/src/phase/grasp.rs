@@ -1,0 +1,130 @@
+//! The open-loop grasp (thesis §6.3.4): from the servo's stand-off pose, move by the
+//! approach offset (expressed relative to the target facet: straight down by the stand-off,
+//! jaws already open and aligned across the facet), close the jaws, check they hold
+//! something, then lift and check again.
+
+use handeye_vision::tracker::{Role, View};
+use handeye_wire::{robot_flags, GripperCommand};
+
+use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, Step};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum GraspStage {
+    /// Along the facet normal, above the block.
+    Forward { wait: Option<MoveWait> },
+    /// Straight down to the grasp height.
+    Down { wait: Option<MoveWait> },
+    Close { since: Option<u64> },
+}
+
+pub struct Grasp {
+    start_frame: u64,
+    stage: GraspStage,
+    approach_m: [f64; 3],
+}
+
+impl Grasp {
+    pub fn new(frame_index: u64, approach_m: [f64; 3]) -> Self {
+        Self { start_frame: frame_index, stage: GraspStage::Forward { wait: None }, approach_m }
+    }
+
+    pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
+        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
+            return Step::Fail(format!("grasp: timed out after {} s in {:?}", m.cfg.grasp.timeout_s, self.stage));
+        }
+        let speed = m.cfg.grasp.approach_speed_mps;
+        match &mut self.stage {
+            GraspStage::Forward { wait } => {
+                let Some(w) = wait else {
+                    // The fingers now pass in front of the facet: the trackers are done.
+                    for role in [Role::Gripper, Role::Target] {
+                        for view in View::ALL {
+                            m.trackers.set_active(role, view, false);
+                        }
+                    }
+                    *wait = Some(MoveWait::new(c.seq, c.frame_index));
+                    m.set_status("grasp: jaws over the target");
+                    return Step::Stay(Cmd::move_by(self.approach_m, 0.0, speed));
+                };
+                match w.poll(c, 1) {
+                    MovePoll::Pending => Step::Stay(Cmd::HOLD),
+                    MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the approach: {}", reject_text(code))),
+                    MovePoll::Done => {
+                        self.stage = GraspStage::Down { wait: Some(MoveWait::new(c.seq, c.frame_index)) };
+                        m.set_status("grasp: descending");
+                        m.snapshot = Some("over_target");
+                        // Down to the grasp height above the table by the robot's own
+                        // kinematics (exact, unlike an image-derived height).
+                        let dz = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m - f64::from(c.robot.tool_pos_m[2]);
+                        Step::Stay(Cmd::move_by([0.0, 0.0, dz], 0.0, speed))
+                    }
+                }
+            }
+            GraspStage::Down { wait } => {
+                let Some(w) = wait else { return Step::Fail("grasp: lost track of the descent".into()) };
+                match w.poll(c, 2) {
+                    MovePoll::Pending => Step::Stay(Cmd::HOLD),
+                    MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the descent: {}", reject_text(code))),
+                    MovePoll::Done => {
+                        self.stage = GraspStage::Close { since: None };
+                        m.set_status("grasp: closing");
+                        m.snapshot = Some("closing");
+                        Step::Stay(Cmd::gripper(GripperCommand::Close))
+                    }
+                }
+            }
+            GraspStage::Close { since } => {
+                let since = *since.get_or_insert(c.frame_index);
+                // Jaws squeezing an object may never report GRIPPER_SETTLED (the fingers keep
+                // trembling against it); after twice the closing time the grip is what it is.
+                let settled = c.robot.flags & robot_flags::GRIPPER_SETTLED != 0;
+                let elapsed = c.frame_index - since;
+                if elapsed < m.cfg.frames(m.cfg.grasp.close_s) || (!settled && elapsed < m.cfg.frames(2.0 * m.cfg.grasp.close_s)) {
+                    return Step::Stay(Cmd::HOLD);
+                }
+                let width = f64::from(c.robot.gripper_width_m);
+                m.grip_width_m = Some(width);
+                if width < m.cfg.grasp.min_grip_width_m {
+                    return Step::Fail(format!("grasp: the jaws closed on nothing (width {:.1} mm)", width * 1e3));
+                }
+                m.snapshot = Some("grasped");
+                Step::Next(Cmd::HOLD)
+            }
+        }
+    }
+}
+
+pub struct Lift {
+    start_frame: u64,
+    wait: Option<MoveWait>,
+}
+
+impl Lift {
+    pub fn new(frame_index: u64) -> Self {
+        Self { start_frame: frame_index, wait: None }
+    }
+
+    pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
+        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
+            return Step::Fail(format!("lift: timed out after {} s", m.cfg.grasp.timeout_s));
+        }
+        let Some(w) = self.wait.as_mut() else {
+            self.wait = Some(MoveWait::new(c.seq, c.frame_index));
+            m.set_status("lift");
+            return Step::Stay(Cmd::move_by([0.0, 0.0, m.cfg.grasp.lift_m], 0.0, m.cfg.grasp.lift_speed_mps));
+        };
+        match w.poll(c, 2) {
+            MovePoll::Pending => Step::Stay(Cmd::HOLD),
+            MovePoll::Rejected(code) => Step::Fail(format!("lift: the robot refused the lift: {}", reject_text(code))),
+            MovePoll::Done => {
+                let width = f64::from(c.robot.gripper_width_m);
+                if width < m.cfg.grasp.min_grip_width_m {
+                    return Step::Fail(format!("lift: the object slipped out (jaw width {:.1} mm)", width * 1e3));
+                }
+                m.snapshot = Some("lifted");
+                m.set_status("done: target lifted");
+                Step::Next(Cmd::HOLD)
+            }
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! Re-acquiring the trackers of one view after its camera moved (a knock): both the plate
+//! and the target are lost in that view at once while the other view still tracks both. The
+//! arm is stopped; the plate tracker (the highest-contrast contour) is searched for over a
+//! grid of image translations of its last good frame (a few hundred candidates, spread over
+//! frames, `CANDIDATES_PER_FRAME` per cycle); the best one restarts it, the target tracker
+//! restarts at its last good frame moved by the same translation (a knocked camera shifts
+//! the whole view), and both must track confidently for a while before the servo resumes
+//! with fresh measurements. The coplanarity servo compares gripper and target in the same
+//! images, so the stale calibration of the moved camera only makes its Jacobian less exact.
+//!
+//! Allocates (tracker clones per candidate): it runs only while the arm is stopped.
+
+use handeye_vision::image::ImageView;
+use handeye_vision::tracker::{AffineFrame, ContourTracker, Role, StereoTrackerSet, View};
+use nalgebra::Vector2;
+
+/// Largest view shift searched for, px (a 3° pan at f = 1800 px is ~94 px).
+pub const MAX_SHIFT_PX: f64 = 160.0;
+/// Grid step of the search, px (the tracker's own search covers ±12 px).
+pub const STEP_PX: f64 = 10.0;
+/// Candidates tried per frame.
+pub const CANDIDATES_PER_FRAME: usize = 120;
+/// Confidence a candidate needs to be taken.
+pub const MIN_SCORE: f64 = 0.8;
+/// Frames both restarted trackers must track before the servo resumes.
+pub const CONFIRM_FRAMES: u32 = 12;
+
+/// The state of one re-acquisition.
+pub struct Recovery {
+    pub view: View,
+    pub start_frame: u64,
+    gripper_frame: AffineFrame,
+    target_frame: AffineFrame,
+    candidates: Vec<Vector2<f64>>,
+    next: usize,
+    best: Option<(f64, Vector2<f64>)>,
+    confirmed: Option<u32>,
+}
+
+/// What a recovery cycle concluded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RecoveryStep {
+    Searching,
+    /// Both trackers of the view are back and steady.
+    Recovered { shift_px: [f64; 2] },
+    Failed(String),
+}
+
+impl Recovery {
+    /// Starts re-acquiring `view`; `None` if its trackers are missing.
+    pub fn start(trackers: &StereoTrackerSet, view: View, frame_index: u64) -> Option<Self> {
+        let g = trackers.get(Role::Gripper, view)?.frame();
+        let t = trackers.get(Role::Target, view)?.frame();
+        // Nearest shifts first: a small knock is found quickly.
+        let n = (MAX_SHIFT_PX / STEP_PX) as i32;
+        let mut candidates: Vec<Vector2<f64>> =
+            (-n..=n).flat_map(|i| (-n..=n).map(move |j| Vector2::new(f64::from(i) * STEP_PX, f64::from(j) * STEP_PX))).collect();
+        candidates.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
+        Some(Self { view, start_frame: frame_index, gripper_frame: g, target_frame: t, candidates, next: 0, best: None, confirmed: None })
+    }
+
+    fn shifted(f: &AffineFrame, d: Vector2<f64>) -> AffineFrame {
+        AffineFrame::new(f.origin + d, f.e1, f.e2)
+    }
+
+    /// One cycle on `image` (the moved view).
+    pub fn step(&mut self, trackers: &mut StereoTrackerSet, image: &ImageView<'_>, other_tracking: bool) -> RecoveryStep {
+        if !other_tracking {
+            return RecoveryStep::Failed("the other view lost its trackers too".into());
+        }
+        if let Some(frames) = self.confirmed.as_mut() {
+            let ok = [Role::Gripper, Role::Target].iter().all(|&r| {
+                trackers.get(r, self.view).is_some_and(|t| t.state().is_tracking() && t.confidence().score >= 0.6)
+            });
+            if !ok {
+                return RecoveryStep::Failed("the re-acquired trackers did not hold".into());
+            }
+            *frames += 1;
+            // Halfway, refine the target's outline from its edges and restart it there: the
+            // shift is the plate's, and a knock also turns the view a little.
+            if *frames == CONFIRM_FRAMES / 2
+                && let Some(t) = trackers.get_mut(Role::Target, self.view)
+                && let Some(corners) = crate::gripper::refine_polygon(t)
+            {
+                let _ = t.reinit(&corners);
+            }
+            if *frames >= CONFIRM_FRAMES {
+                let d = self.best.map(|b| b.1).unwrap_or_default();
+                return RecoveryStep::Recovered { shift_px: [d.x, d.y] };
+            }
+            return RecoveryStep::Searching;
+        }
+        let Some(base) = trackers.get(Role::Gripper, self.view).cloned() else {
+            return RecoveryStep::Failed("no gripper tracker".into());
+        };
+        let end = (self.next + CANDIDATES_PER_FRAME).min(self.candidates.len());
+        for &d in &self.candidates[self.next..end] {
+            let mut t: ContourTracker = base.clone();
+            if t.reinit_at(Self::shifted(&self.gripper_frame, d)).is_err() {
+                continue;
+            }
+            if !t.update(image, 0.0).is_tracking() || !t.update(image, 0.0).is_tracking() {
+                continue;
+            }
+            // Same size as before the knock: the plate's dark border has an outer edge too, and
+            // a contour grown onto it tracks just as confidently.
+            let ratio = t.frame().det() / self.gripper_frame.det();
+            if !(0.9..=1.11).contains(&ratio) {
+                continue;
+            }
+            let score = t.confidence().score;
+            if self.best.is_none_or(|b| score > b.0) {
+                // The shift the tracker converged to, finer than the grid.
+                self.best = Some((score, t.frame().origin - self.gripper_frame.origin));
+            }
+        }
+        self.next = end;
+        if self.next < self.candidates.len() && self.best.is_none_or(|b| b.0 < 0.95) {
+            return RecoveryStep::Searching;
+        }
+        match self.best {
+            Some((score, d)) if score >= MIN_SCORE => {
+                for (role, frame) in [(Role::Gripper, self.gripper_frame), (Role::Target, self.target_frame)] {
+                    if let Some(t) = trackers.get_mut(role, self.view) {
+                        let _ = t.reinit_at(Self::shifted(&frame, d));
+                        trackers.set_active(role, self.view, true);
+                    }
+                }
+                self.confirmed = Some(0);
+                RecoveryStep::Searching
+            }
+            _ => RecoveryStep::Failed(format!(
+                "the plate was not found within ±{MAX_SHIFT_PX:.0} px (best confidence {:.2})",
+                self.best.map_or(0.0, |b| b.0)
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::tracker::TrackerConfig;
+
+    /// A bright plate in a dark border (the gripper) and a grey square (the target), shifted
+    /// by `(dx, dy)`.
+    fn scene(dx: i64, dy: i64) -> ImageBuf {
+        let mut img = ImageBuf::filled(400, 300, 90);
+        let mut rect = |x0: i64, y0: i64, x1: i64, y1: i64, v: u8| {
+            for y in (y0 + dy).max(0)..(y1 + dy).min(300) {
+                for x in (x0 + dx).max(0)..(x1 + dx).min(400) {
+                    img.set(x as usize, y as usize, v);
+                }
+            }
+        };
+        rect(150, 60, 210, 120, 10);
+        rect(158, 68, 202, 112, 220);
+        rect(160, 190, 200, 230, 170);
+        img
+    }
+
+    fn trackers(img: &ImageBuf) -> StereoTrackerSet {
+        let plate = [[157.5, 67.5], [201.5, 67.5], [201.5, 111.5], [157.5, 111.5]];
+        let target = [[159.5, 189.5], [199.5, 189.5], [199.5, 229.5], [159.5, 229.5]];
+        let mut set = StereoTrackerSet::new();
+        for v in View::ALL {
+            set.insert(Role::Gripper, v, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
+            set.insert(Role::Target, v, ContourTracker::new(TrackerConfig::default(), &target).unwrap());
+        }
+        for _ in 0..3 {
+            let s = set.update(&img.view(), &img.view(), 0.03);
+            assert!(s.all_active_tracking());
+        }
+        set
+    }
+
+    #[test]
+    fn a_knocked_view_is_found_again_at_its_shift() {
+        let still = scene(0, 0);
+        let mut set = trackers(&still);
+        // The left camera is knocked: its whole image moves 63 px left and 7 px down.
+        let knocked = scene(-63, 7);
+        let states = set.update(&knocked.view(), &still.view(), 0.03);
+        assert!(!states.get(Role::Gripper, View::Left).unwrap().is_tracking(), "a 63 px jump loses the tracker");
+        let mut rec = Recovery::start(&set, View::Left, 10).unwrap();
+        let mut shift = None;
+        for _ in 0..40 {
+            set.update(&knocked.view(), &still.view(), 0.03);
+            match rec.step(&mut set, &knocked.view(), true) {
+                RecoveryStep::Searching => {}
+                RecoveryStep::Recovered { shift_px } => {
+                    shift = Some(shift_px);
+                    break;
+                }
+                RecoveryStep::Failed(why) => panic!("{why}"),
+            }
+        }
+        let shift = shift.expect("recovered");
+        assert!((shift[0] + 63.0).abs() < 1.0 && (shift[1] - 7.0).abs() < 1.0, "{shift:?}");
+        // Both trackers of the view sit on their shapes again.
+        let g = set.get(Role::Gripper, View::Left).unwrap();
+        assert!(g.state().is_tracking());
+        let c = g.corners().next().unwrap();
+        assert!((c.x - (157.5 - 63.0)).abs() < 1.0 && (c.y - (67.5 + 7.0)).abs() < 1.0, "{c:?}");
+        assert!(set.get(Role::Target, View::Left).unwrap().state().is_tracking());
+    }
+
+    #[test]
+    fn nothing_to_find_fails_with_a_reason() {
+        let still = scene(0, 0);
+        let mut set = trackers(&still);
+        let blank = ImageBuf::filled(400, 300, 90);
+        set.update(&blank.view(), &still.view(), 0.03);
+        let mut rec = Recovery::start(&set, View::Left, 0).unwrap();
+        let mut outcome = RecoveryStep::Searching;
+        for _ in 0..20 {
+            outcome = rec.step(&mut set, &blank.view(), true);
+            if outcome != RecoveryStep::Searching {
+                break;
+            }
+        }
+        assert!(matches!(&outcome, RecoveryStep::Failed(why) if why.contains("not found")), "{outcome:?}");
+        // And it gives up at once when the other view is lost too.
+        let mut rec = Recovery::start(&set, View::Left, 0).unwrap();
+        assert!(matches!(rec.step(&mut set, &blank.view(), false), RecoveryStep::Failed(_)));
+    }
+}

@@ -1,0 +1,227 @@
+//! The run report: overlay PNGs of both views at key moments with the trackers drawn, and a
+//! plot of the servo error against step. Images are copied out of shared memory at those few
+//! moments only and encoded on a separate thread ([`ReportWriter`]), never in the hard loop.
+//!
+//! Overlay colours: gripper plate trackers green, target trackers red (yellow when lost).
+//! The servo plot shows `log10 |e_i|` per step for the six error components: the three mark
+//! parallaxes in pixels (blue shades), `s` and `t` in percent of the facet (orange, red) and
+//! `ρ` in milliradians (grey), from 0.01 at the bottom edge to 100 at the top, one grid line
+//! per decade (values below 0.01 sit on the bottom edge); a falling bundle is convergence.
+
+use std::path::{Path, PathBuf};
+
+use handeye_vision::image::{ImageBuf, ImageView};
+use handeye_wire::{Telemetry, TELEMETRY_TRACKERS};
+use image::{Rgb, RgbImage};
+
+use crate::phase::ServoTraceRow;
+use crate::worker::Worker;
+
+/// A moment worth a picture: both views and the trackers as telemetry reported them.
+pub struct Snapshot {
+    pub label: &'static str,
+    pub frame_id: u64,
+    pub left: ImageBuf,
+    pub right: ImageBuf,
+    pub corners: [[[f32; 2]; 8]; TELEMETRY_TRACKERS],
+    pub tracker_state: [u32; TELEMETRY_TRACKERS],
+}
+
+impl Snapshot {
+    /// Copies both views (allocates; call at key moments only).
+    pub fn take(label: &'static str, left: &ImageView<'_>, right: &ImageView<'_>, t: &Telemetry) -> Self {
+        Self {
+            label,
+            frame_id: t.frame_id,
+            left: left.to_owned(),
+            right: right.to_owned(),
+            corners: t.tracker_corners_px,
+            tracker_state: t.tracker_state,
+        }
+    }
+}
+
+/// What the report thread does.
+pub enum ReportJob {
+    Overlay(Box<Snapshot>),
+    ServoPlot(Vec<ServoTraceRow>),
+}
+
+/// Writes report files on its own thread; the loop hands jobs over without waiting.
+pub struct ReportWriter {
+    worker: Worker<ReportJob, Result<PathBuf, String>>,
+    dir: PathBuf,
+    dropped: u32,
+}
+
+impl ReportWriter {
+    pub fn new(dir: &Path) -> std::io::Result<Self> {
+        std::fs::create_dir_all(dir)?;
+        let out = dir.to_path_buf();
+        let mut count = 0u32;
+        let worker = Worker::spawn("handeye-report", 8, move |job: ReportJob| match job {
+            ReportJob::Overlay(s) => {
+                count += 1;
+                let path = out.join(format!("{count:02}_{}.png", s.label));
+                overlay(&s).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
+            }
+            ReportJob::ServoPlot(rows) => {
+                let path = out.join("servo_error.png");
+                servo_plot(&rows).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
+            }
+        })?;
+        Ok(Self { worker, dir: dir.to_path_buf(), dropped: 0 })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Queues a job; a full queue drops it (counted) rather than wait.
+    pub fn submit(&mut self, job: ReportJob) {
+        if self.worker.try_submit(job).is_err() {
+            self.dropped += 1;
+        }
+    }
+
+    /// Waits for the queued images (at shutdown) and returns the files written and errors.
+    pub fn finish(self) -> (Vec<PathBuf>, Vec<String>) {
+        let mut files = Vec::new();
+        let mut errors = Vec::new();
+        if self.dropped > 0 {
+            errors.push(format!("{} report images dropped (queue full)", self.dropped));
+        }
+        for r in self.worker.finish() {
+            match r {
+                Ok(p) => files.push(p),
+                Err(e) => errors.push(e),
+            }
+        }
+        (files, errors)
+    }
+}
+
+const GRIPPER: Rgb<u8> = Rgb([40, 230, 60]);
+const TARGET: Rgb<u8> = Rgb([240, 40, 40]);
+const LOST: Rgb<u8> = Rgb([250, 220, 0]);
+
+/// Both views side by side in colour with the tracker polygons drawn.
+pub fn overlay(s: &Snapshot) -> RgbImage {
+    let (w, h) = (s.left.view().width() as u32, s.left.view().height() as u32);
+    let mut img = RgbImage::new(2 * w, h);
+    for (k, view) in [s.left.view(), s.right.view()].iter().enumerate() {
+        for y in 0..h {
+            let row = view.row(y as usize);
+            for x in 0..w {
+                let g = row[x as usize];
+                img.put_pixel(k as u32 * w + x, y, Rgb([g, g, g]));
+            }
+        }
+    }
+    for tracker in 0..TELEMETRY_TRACKERS {
+        let view = tracker % 2;
+        let colour = if s.tracker_state[tracker] == 2 {
+            LOST
+        } else if tracker < 2 {
+            GRIPPER
+        } else {
+            TARGET
+        };
+        let pts: Vec<[f64; 2]> = s.corners[tracker]
+            .iter()
+            .filter(|c| c[0].is_finite() && c[1].is_finite())
+            .map(|c| [f64::from(c[0]) + (view as u32 * w) as f64, f64::from(c[1])])
+            .collect();
+        for i in 0..pts.len() {
+            let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+            draw_line(&mut img, a, b, colour);
+        }
+    }
+    img
+}
+
+/// Draws a line segment (clipped to the image).
+pub fn draw_line(img: &mut RgbImage, a: [f64; 2], b: [f64; 2], colour: Rgb<u8>) {
+    let steps = ((b[0] - a[0]).abs().max((b[1] - a[1]).abs()).ceil() as usize).clamp(1, 10_000);
+    for i in 0..=steps {
+        let f = i as f64 / steps as f64;
+        let (x, y) = ((a[0] + f * (b[0] - a[0])).round(), (a[1] + f * (b[1] - a[1])).round());
+        if x >= 0.0 && y >= 0.0 && (x as u32) < img.width() && (y as u32) < img.height() {
+            img.put_pixel(x as u32, y as u32, colour);
+        }
+    }
+}
+
+/// `log10 |e|` of the six error components against step (see the module docs).
+pub fn servo_plot(rows: &[ServoTraceRow]) -> RgbImage {
+    let (w, h, margin) = (640u32, 360u32, 30.0);
+    let mut img = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
+    let (x0, x1, y0, y1) = (margin, w as f64 - margin, h as f64 - margin, margin);
+    let grey = Rgb([160, 160, 160]);
+    draw_line(&mut img, [x0, y0], [x1, y0], Rgb([0, 0, 0]));
+    draw_line(&mut img, [x0, y0], [x0, y1], Rgb([0, 0, 0]));
+    // Decades 0.01 .. 100.
+    for d in 0..=4 {
+        let y = y0 + (y1 - y0) * d as f64 / 4.0;
+        draw_line(&mut img, [x0 - 5.0, y], [x1, y], if d == 0 { Rgb([0, 0, 0]) } else { Rgb([225, 225, 225]) });
+    }
+    let n = rows.len().max(2) as f64 - 1.0;
+    let colours = [Rgb([20, 60, 200]), Rgb([60, 120, 230]), Rgb([120, 170, 250]), Rgb([240, 140, 20]), Rgb([200, 30, 30]), grey];
+    let to_xy = |i: usize, v: f64, k: usize| {
+        let v = match k {
+            3 | 4 => v * 100.0,
+            5 => v * 1000.0,
+            _ => v,
+        };
+        let l = v.abs().max(1e-6).log10().clamp(-2.0, 2.2) + 2.0;
+        [x0 + (x1 - x0) * i as f64 / n, y0 + (y1 - y0) * l / 4.0]
+    };
+    for (i, r) in rows.iter().enumerate() {
+        let x = x0 + (x1 - x0) * i as f64 / n;
+        draw_line(&mut img, [x, y0], [x, y0 + 4.0], Rgb([0, 0, 0]));
+        if i == 0 {
+            continue;
+        }
+        for (k, colour) in colours.iter().enumerate() {
+            let (a, b) = (rows[i - 1].error[k], r.error[k]);
+            if a.is_finite() && b.is_finite() {
+                draw_line(&mut img, to_xy(i - 1, a, k), to_xy(i, b, k), *colour);
+            }
+        }
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlay_draws_the_polygons_where_telemetry_put_them() {
+        let left = ImageBuf::filled(100, 80, 50);
+        let right = ImageBuf::filled(100, 80, 50);
+        let mut corners = [[[f32::NAN; 2]; 8]; 4];
+        corners[0][..4].copy_from_slice(&[[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0]]);
+        corners[3][..3].copy_from_slice(&[[50.0, 50.0], [70.0, 50.0], [60.0, 70.0]]);
+        let s = Snapshot { label: "t", frame_id: 1, left, right, corners, tracker_state: [1, 0, 0, 2] };
+        let img = overlay(&s);
+        assert_eq!(img.dimensions(), (200, 80));
+        assert_eq!(*img.get_pixel(20, 10), GRIPPER, "gripper left edge");
+        assert_eq!(*img.get_pixel(160, 50), LOST, "target right (lost), shifted into the right half");
+        assert_eq!(*img.get_pixel(60, 50), Rgb([50, 50, 50]), "nothing drawn in the left half for a right tracker");
+    }
+
+    #[test]
+    fn servo_plot_falls_with_the_error() {
+        let rows: Vec<ServoTraceRow> = (0..10)
+            .map(|i| ServoTraceRow { step: i, frame: 0, error: [100.0 / 2f64.powi(i as i32), f64::NAN, f64::NAN, f64::NAN, f64::NAN, f64::NAN], offset_m: 0.0, offset_yaw_rad: 0.0 })
+            .collect();
+        let img = servo_plot(&rows);
+        // The first parallax line starts at 100 px (the top decade line, y = 30) and ends at
+        // 0.2 px (between the 0.1 and 1 lines: y = 330 - 75 * 1.3 = 232).
+        let column_has_blue = |x: u32, ys: std::ops::Range<u32>| ys.into_iter().any(|y| *img.get_pixel(x, y) == Rgb([20, 60, 200]));
+        assert!(column_has_blue(31, 28..40), "start at 100 px");
+        assert!(!column_has_blue(31, 150..330));
+        assert!(column_has_blue(608, 222..242), "end at 0.2 px");
+    }
+}

@@ -1,0 +1,114 @@
+//! What stops the arm: a robot fault or a reading that makes no sense, a lost tracker in a
+//! phase that needs it. (A stale or vanished camera stream is caught by the transport loop,
+//! which knows the wall clock.) Each check returns the reason, worded for the operator.
+
+use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
+use handeye_wire::{robot_flags, Phase, RobotState};
+
+use crate::config::SafetyConfig;
+use crate::phase::needs_trackers;
+
+/// Why the arm must stop, as text that fits the telemetry's reason (96 bytes).
+pub type StopReason = String;
+
+/// Checks one robot state reading against the previous one.
+pub fn check_robot(cfg: &SafetyConfig, previous: Option<&RobotState>, s: &RobotState) -> Result<(), StopReason> {
+    if s.flags & robot_flags::FAULT != 0 {
+        return Err(format!("robot fault (code {})", s.fault));
+    }
+    if s.flags & robot_flags::WATCHDOG_STOP != 0 {
+        return Err("robot watchdog stopped the arm (commands arrived late)".into());
+    }
+    let p = s.tool_pos_m.map(f64::from);
+    if (0..3).any(|i| !(p[i] >= cfg.workspace_min_m[i] && p[i] <= cfg.workspace_max_m[i])) {
+        return Err(format!("nonsense robot state: tool at ({:.3}, {:.3}, {:.3}) m, outside the workspace", p[0], p[1], p[2]));
+    }
+    if let Some(prev) = previous {
+        let q = prev.tool_pos_m.map(f64::from);
+        let jump = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+        if jump > cfg.max_state_jump_m {
+            return Err(format!("nonsense robot state: tool jumped {:.0} mm between readings", jump * 1e3));
+        }
+        if s.seq <= prev.seq && s.time_ns < prev.time_ns {
+            return Err("nonsense robot state: sequence went backwards".into());
+        }
+    }
+    Ok(())
+}
+
+/// Checks the trackers a phase depends on.
+pub fn check_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Result<(), StopReason> {
+    let (gripper, target) = needs_trackers(phase);
+    for (role, needed, name) in [(Role::Gripper, gripper, "gripper"), (Role::Target, target, "target")] {
+        if !needed || !View::ALL.iter().all(|&v| trackers.is_active(role, v)) {
+            continue;
+        }
+        for view in View::ALL {
+            let side = if view == View::Left { "left" } else { "right" };
+            match states.get(role, view) {
+                Some(TrackState::Lost(why)) => return Err(format!("{name} tracker lost ({side} view): {why}")),
+                None => return Err(format!("{name} tracker ({side} view) did not run")),
+                Some(TrackState::Tracking) => {}
+            }
+            let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
+            if score.is_nan() || score < cfg.min_tracker_score {
+                return Err(format!("{name} tracker ({side} view) confidence {score:.2} < {}", cfg.min_tracker_score));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_wire::WIRE_VERSION;
+
+    fn state(p: [f32; 3]) -> RobotState {
+        RobotState { version: WIRE_VERSION, seq: 1, time_ns: 10, tool_pos_m: p, gripper_width_m: 0.08, ..Default::default() }
+    }
+
+    #[test]
+    fn faults_and_nonsense_readings_stop() {
+        let cfg = SafetyConfig::default();
+        let ok = state([0.3, 0.0, 0.2]);
+        assert_eq!(check_robot(&cfg, None, &ok), Ok(()));
+        let fault = RobotState { flags: robot_flags::FAULT, fault: 7, ..ok };
+        assert!(check_robot(&cfg, None, &fault).unwrap_err().contains("fault"));
+        let wd = RobotState { flags: robot_flags::WATCHDOG_STOP, ..ok };
+        assert!(check_robot(&cfg, None, &wd).unwrap_err().contains("watchdog"));
+        let far = state([5.0, 0.0, 0.2]);
+        assert!(check_robot(&cfg, None, &far).unwrap_err().contains("outside the workspace"));
+        let jumped = RobotState { seq: 2, time_ns: 20, ..state([0.3, 0.1, 0.2]) };
+        assert!(check_robot(&cfg, Some(&ok), &jumped).unwrap_err().contains("jumped 100 mm"));
+        let moved = RobotState { seq: 2, time_ns: 20, ..state([0.301, 0.0, 0.2]) };
+        assert_eq!(check_robot(&cfg, Some(&ok), &moved), Ok(()));
+    }
+
+    #[test]
+    fn lost_trackers_stop_only_phases_that_need_them() {
+        use handeye_vision::image::ImageBuf;
+        use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+        let mut img = ImageBuf::filled(160, 120, 200);
+        for y in 40..80 {
+            for x in 60..100 {
+                img.set(x, y, 50);
+            }
+        }
+        let square = [[59.5, 39.5], [99.5, 39.5], [99.5, 79.5], [59.5, 79.5]];
+        let mut set = StereoTrackerSet::new();
+        for v in View::ALL {
+            set.insert(Role::Target, v, ContourTracker::new(TrackerConfig::default(), &square).unwrap());
+            set.insert(Role::Gripper, v, ContourTracker::new(TrackerConfig::default(), &square).unwrap());
+        }
+        let cfg = SafetyConfig::default();
+        let states = set.update(&img.view(), &img.view(), 0.03);
+        assert_eq!(check_trackers(&cfg, Phase::Servo, &states, &set), Ok(()));
+        // The target disappears (a blank image): lost in servo, irrelevant in calibrate.
+        let blank = ImageBuf::filled(160, 120, 200);
+        let states = set.update(&blank.view(), &blank.view(), 0.03);
+        let err = check_trackers(&cfg, Phase::Servo, &states, &set).unwrap_err();
+        assert!(err.contains("tracker lost"), "{err}");
+        assert_eq!(check_trackers(&cfg, Phase::Grasp, &states, &set), Ok(()));
+    }
+}

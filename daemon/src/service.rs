@@ -1,0 +1,162 @@
+//! The daemon on the shared-memory services of a domain: subscribes to `handeye/stereo`
+//! (queue of one: always the newest frame) and `handeye/robot/state`, publishes
+//! `handeye/robot/command` and `handeye/telemetry`. Whoever publishes frames and state — the
+//! simulator, or cameras and a robot driver — the daemon cannot tell.
+//!
+//! Per frame: wait for it on the stereo service's event (no busy polling), drain the robot
+//! states, run [`HardLoop::cycle`] over the sample's pixels in place, publish the telemetry
+//! and then the command stamped with the frame's id (telemetry first, so whoever waits for
+//! the command already has what the daemon said about that frame). Stops the arm (explicit
+//! `Stop`) and reports when no frame comes for `stale_frame_ms`, when the camera or robot
+//! publisher goes away, or on SIGINT/SIGTERM.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use handeye_vision::image::ImageView;
+use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
+use handeye_wire::stereo::{StereoEvent, StereoSubscriber};
+use handeye_wire::{monotonic_ns, Domain, RobotCommand, RobotState, Telemetry, WireNode};
+
+use crate::config::DaemonConfig;
+use crate::hard_loop::HardLoop;
+use crate::hint::OperatorHint;
+use crate::outcome::DaemonOutcome;
+use crate::report::{ReportJob, ReportWriter, Snapshot};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    #[error(transparent)]
+    Node(#[from] handeye_wire::NodeError),
+    #[error(transparent)]
+    Stereo(#[from] handeye_wire::stereo::StereoSubscriberError),
+    #[error(transparent)]
+    Message(#[from] handeye_wire::message::MessagePortError),
+    #[error("waiting for frames: {0}")]
+    Wait(String),
+    #[error("publishing: {0}")]
+    Send(String),
+    #[error("starting a thread: {0}")]
+    Thread(#[from] std::io::Error),
+    #[error("no stereo frame arrived within {0:.0} s of start-up")]
+    NoFrames(f64),
+}
+
+/// Options of one daemon run.
+pub struct ServiceOptions {
+    pub domain: Domain,
+    pub config: DaemonConfig,
+    pub hint: Option<OperatorHint>,
+    /// Report folder (overlays, servo plot); `None` = no report images.
+    pub report_dir: Option<PathBuf>,
+}
+
+/// What a run produced.
+pub struct ServiceResult {
+    pub outcome: DaemonOutcome,
+    pub report_files: Vec<PathBuf>,
+    pub report_errors: Vec<String>,
+}
+
+/// Runs the daemon until its task ends, the arm had to be stopped, or it is interrupted.
+pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
+    let start = Instant::now();
+    let node = WireNode::create(&options.domain, "handeye-daemon")?;
+    let mut frames = StereoSubscriber::create(&node, 1)?;
+    let mut states = MessageSubscriber::<RobotState>::create(&node)?;
+    let mut commands = MessagePublisher::<RobotCommand>::create(&node)?;
+    let mut telemetry = MessagePublisher::<Telemetry>::create(&node)?;
+    let stale = Duration::from_millis(options.config.stale_frame_ms);
+    let start_timeout = Duration::from_secs_f64(options.config.start_timeout_s);
+    let mut report = options.report_dir.as_deref().map(ReportWriter::new).transpose()?;
+    let mut hl = HardLoop::new(options.config, options.hint)?;
+    let mut got_frame = false;
+    let send = |commands: &mut MessagePublisher<RobotCommand>, telemetry: &mut MessagePublisher<Telemetry>, cmd: &RobotCommand, t: &Telemetry| {
+        telemetry.send(t).map_err(|e| ServiceError::Send(e.to_string()))?;
+        commands.send(cmd).map_err(|e| ServiceError::Send(e.to_string()))?;
+        Ok::<(), ServiceError>(())
+    };
+    let mut stop_reason: Option<String> = None;
+    loop {
+        let timeout = if got_frame { stale } else { start_timeout.saturating_sub(start.elapsed()).max(Duration::from_millis(1)) };
+        let event = frames.wait(timeout).map_err(|e| ServiceError::Wait(e.to_string()))?;
+        match event {
+            StereoEvent::Frame(frame) => {
+                got_frame = true;
+                let receive_ns = frame.receive_time_ns();
+                let layout = *frame.layout();
+                let (Some(l), Some(r)) = (frame.camera(0), frame.camera(1)) else {
+                    stop_reason = Some("camera stream has fewer than two views".into());
+                    break;
+                };
+                let (Ok(left), Ok(right)) = (
+                    ImageView::new(l, layout.width, layout.height, layout.stride),
+                    ImageView::new(r, layout.width, layout.height, layout.stride),
+                ) else {
+                    stop_reason = Some("camera frames are not GRAY8 views".into());
+                    break;
+                };
+                loop {
+                    match states.wait(Duration::ZERO).map_err(|e| ServiceError::Wait(e.to_string()))? {
+                        MessageEvent::Message(s) => hl.robot_state(&s),
+                        MessageEvent::PublisherGone => {
+                            hl.safety_stop("robot state publisher gone");
+                        }
+                        MessageEvent::Timeout | MessageEvent::PublisherUp => break,
+                        MessageEvent::Interrupted => break,
+                    }
+                }
+                let cmd = *hl.cycle(frame.frame_id(), &left, &right);
+                let loop_ns = monotonic_ns().saturating_sub(receive_ns);
+                let t = *hl.finish_cycle(loop_ns);
+                send(&mut commands, &mut telemetry, &cmd, &t)?;
+                if let Some(label) = hl.mission.snapshot.take()
+                    && let Some(rep) = report.as_mut()
+                {
+                    rep.submit(ReportJob::Overlay(Box::new(Snapshot::take(label, &left, &right, &t))));
+                }
+                drop(frame);
+                if hl.finished() {
+                    break;
+                }
+            }
+            StereoEvent::Timeout => {
+                if !got_frame {
+                    return Err(ServiceError::NoFrames(start_timeout.as_secs_f64()));
+                }
+                stop_reason = Some(format!("no camera frame for {} ms", stale.as_millis()));
+                break;
+            }
+            StereoEvent::PublisherGone => {
+                if hl.phase() == handeye_wire::Phase::Done {
+                    break;
+                }
+                stop_reason = Some("camera stream gone".into());
+                break;
+            }
+            StereoEvent::PublisherUp => {}
+            StereoEvent::Interrupted => {
+                stop_reason = Some("interrupted".into());
+                break;
+            }
+        }
+    }
+    if let Some(reason) = stop_reason {
+        let done = hl.phase() == handeye_wire::Phase::Done;
+        let (cmd, t) = hl.safety_stop(&reason);
+        if !done {
+            tracing::warn!(%reason, "stopping the arm");
+        }
+        // The robot may be gone too; a failed send changes nothing about the outcome.
+        let _ = send(&mut commands, &mut telemetry, &cmd, &t);
+    }
+    let outcome = hl.outcome(start.elapsed().as_secs_f64());
+    let (report_files, report_errors) = match report {
+        Some(mut rep) => {
+            rep.submit(ReportJob::ServoPlot(outcome.servo_trace.clone()));
+            rep.finish()
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    Ok(ServiceResult { outcome, report_files, report_errors })
+}

@@ -1,0 +1,84 @@
+//! Helpers for the end-to-end tests: `handeye run` as a user runs it.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::Value;
+
+pub fn scenario(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios").join(name)
+}
+
+/// A fresh temporary folder, removed on drop.
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    pub fn new(stem: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("handeye-{stem}-{}-{}", std::process::id(), handeye_wire::monotonic_ns()));
+        std::fs::create_dir_all(&d).unwrap();
+        Self(d)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// `handeye run SCENARIO --json --out DIR [extra]`: the summary, the sim's and daemon's
+/// JSONs, and the exit status.
+pub struct RunResult {
+    pub summary: Value,
+    pub sim: Value,
+    pub daemon: Value,
+    pub status: i32,
+    pub out: TempDir,
+}
+
+pub fn run(scenario_file: &str, extra: &[&str]) -> RunResult {
+    let out = TempDir::new(scenario_file.trim_end_matches(".toml"));
+    let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
+        .arg("run")
+        .arg(scenario(scenario_file))
+        .arg("--json")
+        .arg("--out")
+        .arg(&out.0)
+        .args(extra)
+        .env("HANDEYE_LOG", "warn")
+        .output()
+        .expect("handeye run");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let line = stdout.lines().rev().find(|l| l.starts_with('{')).unwrap_or_else(|| {
+        panic!("no JSON from handeye run {scenario_file}:\nstdout: {stdout}\nstderr: {}", String::from_utf8_lossy(&o.stderr))
+    });
+    let summary: Value = serde_json::from_str(line).unwrap();
+    let read = |name: &str| -> Value {
+        std::fs::read_to_string(out.0.join(name)).ok().and_then(|t| serde_json::from_str(&t).ok()).unwrap_or(Value::Null)
+    };
+    let (sim, daemon) = (read("sim.json"), read("daemon.json"));
+    RunResult { summary, sim, daemon, status: o.status.code().unwrap_or(-1), out }
+}
+
+impl RunResult {
+    /// The summary, the sim's phases and the tail of both logs, for assertion messages.
+    pub fn explain(&self) -> String {
+        let tail = |name: &str| {
+            let t = std::fs::read_to_string(self.out.0.join(name)).unwrap_or_default();
+            let lines: Vec<&str> = t.lines().collect();
+            lines[lines.len().saturating_sub(4)..].join("\n")
+        };
+        format!(
+            "summary: {}\nsim saw: {}\nsim stderr: {}\ndaemon stderr: {}",
+            self.summary,
+            self.sim["daemon"],
+            tail("sim.stderr.log"),
+            tail("daemon.stderr.log")
+        )
+    }
+
+    pub fn f(&self, key: &str) -> f64 {
+        self.summary[key].as_f64().unwrap_or(f64::NAN)
+    }
+}

@@ -1,0 +1,215 @@
+//! Profiling harness for the contour tracker on the real `visp-cube` frames, without the CLI
+//! (so a release build of `handeye-vision` alone is enough, and `valgrind --tool=callgrind`
+//! sees only tracker work after the frames are decoded).
+//!
+//! Runs the same stereo loop as `handeye bench tracker` (top face as gripper, left face as
+//! target; frame k left, frame k+1 right) `REPEATS` times and prints the minimum and median
+//! time per stereo update, then tracks the top face once and prints its worst error against
+//! the ground truth of `vision/tests/tracker_visp_cube.rs`.
+//!
+//! ```text
+//! cargo run --release -p handeye-vision --example tracker_profile -- ../shared/data/visp-cube [REPEATS]
+//! ```
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use handeye_vision::image::ImageBuf;
+use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
+use nalgebra::Vector2;
+
+const TOP: [[f64; 2]; 4] = [[315.0, 234.0], [385.0, 205.0], [443.0, 251.0], [365.0, 291.0]];
+const LEFT: [[f64; 2]; 4] = [[315.0, 234.0], [365.0, 291.0], [361.0, 350.0], [317.0, 289.0]];
+const TRUTH: [(usize, [[f64; 2]; 4]); 6] = [
+    (0, [[314.8, 234.0], [384.0, 204.8], [443.0, 253.0], [366.5, 291.0]]),
+    (50, [[322.4, 216.0], [374.4, 178.4], [443.0, 212.4], [390.0, 257.5]]),
+    (100, [[296.3, 155.8], [345.3, 128.0], [402.5, 155.0], [351.7, 190.8]]),
+    (150, [[293.6, 135.7], [313.6, 101.4], [380.0, 110.7], [362.0, 150.0]]),
+    (200, [[296.5, 139.0], [275.0, 104.0], [336.0, 92.5], [361.9, 121.4]]),
+    (217, [[297.0, 139.0], [265.3, 106.1], [323.0, 91.0], [357.0, 117.5]]),
+];
+
+fn load(dir: &Path, k: usize) -> ImageBuf {
+    let path = dir.join(format!("image{k:04}.png"));
+    let img = image::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_luma8();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    ImageBuf::from_vec(img.into_raw(), w, h).unwrap()
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let dir = PathBuf::from(args.next().unwrap_or_else(|| "../shared/data/visp-cube".into()));
+    let repeats: usize = args.next().map(|s| s.parse().expect("REPEATS")).unwrap_or(5);
+    let frames: Vec<ImageBuf> = (0..218).map(|k| load(&dir, k)).collect();
+    // Experiments: TRACKER_<FIELD>=value overrides a few settings.
+    let env = |name: &str| std::env::var(name).ok().map(|v| v.parse::<f64>().expect(name));
+    let mut config = TrackerConfig::default();
+    if let Some(v) = env("TRACKER_PASSES") {
+        config.passes = v as usize;
+    }
+    if let Some(v) = env("TRACKER_ITERATIONS") {
+        config.iterations = v as usize;
+    }
+    if let Some(v) = env("TRACKER_REFINE_ITERATIONS") {
+        config.refine_iterations = v as usize;
+    }
+    if let Some(v) = env("TRACKER_REFINE_SEARCH_PX") {
+        config.refine_search_px = v;
+    }
+    if let Some(v) = env("TRACKER_REFINE_SKIP_PX") {
+        config.refine_skip_px = v;
+    }
+    let dt_s = 1.0 / 30.0;
+
+    if std::env::var_os("TRACKER_GRID").is_some() {
+        robustness_grid(&frames, config);
+        return;
+    }
+    let mut set = StereoTrackerSet::new();
+    set.insert(Role::Gripper, View::Left, ContourTracker::new(config, &TOP).unwrap());
+    set.insert(Role::Gripper, View::Right, ContourTracker::new(config, &TOP).unwrap());
+    set.insert(Role::Target, View::Left, ContourTracker::new(config, &LEFT).unwrap());
+    set.insert(Role::Target, View::Right, ContourTracker::new(config, &LEFT).unwrap());
+    let mut times = Vec::new();
+    let mut lost = 0;
+    for _ in 0..repeats {
+        for role in Role::ALL {
+            for view in View::ALL {
+                let corners = if role == Role::Gripper { &TOP } else { &LEFT };
+                set.get_mut(role, view).unwrap().reinit(corners).unwrap();
+            }
+        }
+        for k in 0..frames.len() - 1 {
+            let started = Instant::now();
+            let states = set.update(&frames[k].view(), &frames[k + 1].view(), if k == 0 { 0.0 } else { dt_s });
+            times.push(started.elapsed().as_secs_f64() * 1e6);
+            if !states.all_active_tracking() {
+                lost += 1;
+                break;
+            }
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    if !times.is_empty() {
+        println!(
+            "stereo update: min {:.1} µs  median {:.1} µs  ({} updates, {} passes lost a contour)",
+            times[0],
+            times[times.len() / 2],
+            times.len(),
+            lost
+        );
+    }
+
+    // TRACKER_INIT_OFFSET="dx,dy": start the top face that far off (robustness checks).
+    let offset: Vec<f64> = std::env::var("TRACKER_INIT_OFFSET")
+        .map(|v| v.split(',').map(|x| x.parse().expect("TRACKER_INIT_OFFSET")).collect())
+        .unwrap_or_else(|_| vec![0.0, 0.0]);
+    let start: Vec<[f64; 2]> = TOP.iter().map(|c| [c[0] + offset[0], c[1] + offset[1]]).collect();
+    let mut tracker = ContourTracker::new(config, &start).unwrap();
+    let mut worst: f64 = 0.0;
+    let mut per_frame = Vec::new();
+    for (k, frame) in frames.iter().enumerate() {
+        let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s });
+        if !state.is_tracking() {
+            println!("top face lost at frame {k}: {state:?}");
+            break;
+        }
+        if let Some((_, truth)) = TRUTH.iter().find(|(f, _)| *f == k) {
+            let mut frame_worst: f64 = 0.0;
+            for (c, t) in tracker.corners().zip(truth) {
+                frame_worst = frame_worst.max((c - Vector2::new(t[0], t[1])).norm());
+            }
+            per_frame.push(format!("{k}: {frame_worst:.2}"));
+            worst = worst.max(frame_worst);
+        }
+    }
+    println!("top face: worst annotated corner error {worst:.2} px ({})", per_frame.join(", "));
+
+    // With a third argument: every face's corners on every frame into that file, to compare
+    // two builds' outputs exactly.
+    if let Some(out) = args.next() {
+        const RIGHT: [[f64; 2]; 4] = [[365.0, 291.0], [443.0, 251.0], [438.0, 300.0], [361.0, 350.0]];
+        let mut text = String::new();
+        for (name, face) in [("top", TOP), ("left", LEFT), ("right", RIGHT)] {
+            let mut tracker = ContourTracker::new(config, &face).unwrap();
+            for (k, frame) in frames.iter().enumerate() {
+                let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s });
+                let corners: Vec<String> = tracker.corners().map(|c| format!("{:.4} {:.4}", c.x, c.y)).collect();
+                text += &format!("{name} {k} {} {:.4} {}\n", state.code(), tracker.confidence().score, corners.join(" "));
+                if !state.is_tracking() {
+                    println!("{name}: lost at frame {k}: {:?}", state.lost_reason());
+                    break;
+                }
+            }
+        }
+        std::fs::write(&out, text).unwrap();
+    }
+}
+
+/// Tracks the top and left faces from a grid of initial offsets (and a few scalings about the
+/// face's centre) and summarises how often the top face is lost or strays >= 4 px from the
+/// ground truth (frames after 0), and how often the left face is lost.
+fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) {
+    let dt_s = 1.0 / 30.0;
+    let mut inits = Vec::new();
+    for dy in -3..=3 {
+        for dx in -3..=3 {
+            inits.push((dx as f64, dy as f64, 1.0));
+        }
+    }
+    for scale in [0.97, 1.03] {
+        for (dx, dy) in [(0.0, 0.0), (1.5, -1.0), (-1.0, 1.5)] {
+            inits.push((dx, dy, scale));
+        }
+    }
+    let place = |face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64| -> Vec<[f64; 2]> {
+        let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
+        face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
+    };
+    let (mut top_fail, mut top_lost, mut left_lost) = (Vec::new(), 0, 0);
+    let mut worsts = Vec::new();
+    for &(dx, dy, scale) in &inits {
+        let mut tracker = ContourTracker::new(config, &place(&TOP, dx, dy, scale)).unwrap();
+        let mut worst: f64 = 0.0;
+        let mut lost = false;
+        for (k, frame) in frames.iter().enumerate() {
+            if !tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
+                lost = true;
+                break;
+            }
+            if let Some((_, truth)) = TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
+                for (c, t) in tracker.corners().zip(truth) {
+                    worst = worst.max((c - Vector2::new(t[0], t[1])).norm());
+                }
+            }
+        }
+        if lost {
+            top_lost += 1;
+            top_fail.push(format!("{dx},{dy},{scale}(lost)"));
+        } else {
+            worsts.push(worst);
+            if worst >= 4.0 {
+                top_fail.push(format!("{dx},{dy},{scale}({worst:.2})"));
+            }
+        }
+        let mut left = ContourTracker::new(config, &place(&LEFT, dx, dy, scale)).unwrap();
+        for (k, frame) in frames.iter().enumerate() {
+            if !left.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
+                left_lost += 1;
+                break;
+            }
+        }
+    }
+    worsts.sort_by(f64::total_cmp);
+    let mean = worsts.iter().sum::<f64>() / worsts.len().max(1) as f64;
+    println!(
+        "grid {} runs: top fails {} (lost {}), top worst error mean {mean:.2} median {:.2} max {:.2}; left lost {}; failed: {}",
+        inits.len(),
+        top_fail.len(),
+        top_lost,
+        worsts.get(worsts.len() / 2).copied().unwrap_or(0.0),
+        worsts.last().copied().unwrap_or(0.0),
+        left_lost,
+        top_fail.join(" ")
+    );
+}
