@@ -47,7 +47,7 @@ fn snapshots_meet_the_acceptance_measure() {
     let snaps = snapshots(&scratch.0, 10);
     let mut planner = Planner::new(PlannerConfig::default());
     let (mut considered, mut found, mut spurious) = (0, 0, 0);
-    let mut corners = Vec::new();
+    let (mut corners, mut corners_affine) = (Vec::new(), Vec::new());
     let mut text = String::new();
     for snap in &snaps {
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));
@@ -57,16 +57,18 @@ fn snapshots_meet_the_acceptance_measure() {
         found += s.found();
         spurious += s.spurious();
         corners.extend(s.corner_errors_m);
+        corners_affine.extend(s.corner_errors_affine_m);
     }
     let rate = found as f64 / considered as f64;
     let spurious_per_scene = spurious as f64 / snaps.len() as f64;
     let med = median(&corners).expect("corners");
     text += &format!(
-        "total: {} scenes, found {found} of {considered} faces ({:.1}%), {spurious} spurious ({spurious_per_scene:.2} per scene), corner median {:.2} mm over {}\n",
+        "total: {} scenes, found {found} of {considered} faces ({:.1}%), {spurious} spurious ({spurious_per_scene:.2} per scene), corner median {:.2} mm over {} (through the affine model: {:.2} mm)\n",
         snaps.len(),
         rate * 100.0,
         med * 1e3,
-        corners.len()
+        corners.len(),
+        median(&corners_affine).unwrap_or(f64::NAN) * 1e3,
     );
     eprintln!("{text}");
     assert!(rate >= 0.9, "found {found} of {considered} faces:\n{text}");
