@@ -351,3 +351,46 @@ fn diag_final_epipolar() {
         eprintln!("{:<14} final |res| median {:.2} max {:.2}; cage median {:.2} max {:.2}; {:?} corr {:?}", snap.name, median(&r).unwrap(), mx(&r), median(&r0).unwrap(), mx(&r0), plan.bootstrap, plan.epipolar_correction.map(|c| c.coef));
     }
 }
+
+/// Grey-level step across every edge of each missed face, per view (inside minus outside,
+/// sampled 2.5 px either side of the middle 60% of the edge).
+#[test]
+#[ignore]
+fn diag_contrast() {
+    use handeye_vision::planner::geom;
+    let dir = std::path::PathBuf::from("/tmp/pl/diag");
+    let snaps = snapshots(&dir, 10);
+    let mut planner = Planner::new(PlannerConfig::default());
+    for snap in &snaps {
+        let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));
+        let s = score(snap, &plan);
+        for fs in s.faces.iter().filter(|f| !f.found) {
+            let face = &snap.faces[fs.face];
+            let mut line = format!("{} {}:", snap.name, face.label);
+            for v in 0..2 {
+                let img = if v == 0 { &snap.left } else { &snap.right };
+                let p = &face.polygon[v];
+                let c = p.iter().fold([0.0, 0.0], |a, q| [a[0] + q[0] / p.len() as f64, a[1] + q[1] / p.len() as f64]);
+                let mut steps = Vec::new();
+                for k in 0..p.len() {
+                    let (a, b) = (p[k], p[(k + 1) % p.len()]);
+                    let d = geom::sub(b, a);
+                    let len = geom::norm(d);
+                    let mut n = [-d[1] / len, d[0] / len];
+                    if geom::dot(n, geom::sub(c, a)) < 0.0 { n = [-n[0], -n[1]]; }
+                    let (mut si, mut so, mut cnt) = (0.0, 0.0, 0.0);
+                    for i in 0..=20 {
+                        let t = 0.2 + 0.6 * i as f64 / 20.0;
+                        let q = geom::add(a, geom::scale(d, t));
+                        let (pi, po) = (geom::add(q, geom::scale(n, 2.5)), geom::sub(q, geom::scale(n, 2.5)));
+                        let g = |x: [f64; 2]| img.get((x[0] as usize).min(img.width - 1), (x[1] as usize).min(img.height - 1)) as f64;
+                        si += g(pi); so += g(po); cnt += 1.0;
+                    }
+                    steps.push(format!("{:.0}({:.0}px)", (si - so) / cnt, len));
+                }
+                line += &format!("  v{v}: {}", steps.join(" "));
+            }
+            eprintln!("{line}");
+        }
+    }
+}
