@@ -28,10 +28,14 @@ fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
         snapshot(p, &d);
         out.push(Snapshot::load(&name, &d));
     }
+    // The random layouts share clutter3's cameras: blocks go where both see them whole.
+    let cams = out.iter().find(|s: &&Snapshot| s.name == "clutter3").expect("clutter3 snapshot").cameras.clone();
+    let (w, h) = (out[0].left.width as f64, out[0].left.height as f64);
+    let visible = |b: &BlockLayout| in_view(b, &cams, w, h, 5.0);
     for seed in 1..=random {
         let count = 2 + (seed as usize % 4);
         let name = format!("random{seed:02}");
-        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light));
+        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light, &visible));
         let file = dir.join(format!("{name}.toml"));
         std::fs::write(&file, toml).expect("write scenario");
         let d = dir.join(&name);

@@ -150,10 +150,34 @@ fn contrasting_shades(rng: &mut Rng, kind: &str, size_mm: [f64; 3], yaw_deg: f64
 /// 12 grey levels of 255 (sensor noise is 1.5).
 pub const MIN_CONTRAST: f64 = 12.0 / 255.0;
 
+/// The corners of a block's bounding box (it stands on the table), robot frame.
+pub fn box_corners_m(b: &BlockLayout) -> Vec<[f64; 3]> {
+    let (s, c) = b.yaw_deg.to_radians().sin_cos();
+    let [hx, hy, h] = [0.5e-3 * b.size_mm[0], 0.5e-3 * b.size_mm[1], 1e-3 * b.size_mm[2]];
+    let mut out = Vec::with_capacity(8);
+    for (x, y) in [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)] {
+        for z in [0.0, h] {
+            out.push([b.position_m[0] + c * x - s * y, b.position_m[1] + s * x + c * y, z]);
+        }
+    }
+    out
+}
+
+/// Whether both cameras see the whole block, `margin_px` inside the image.
+pub fn in_view(b: &BlockLayout, cameras: &[Camera; 2], width: f64, height: f64, margin_px: f64) -> bool {
+    box_corners_m(b).iter().all(|x| {
+        cameras.iter().all(|cam| {
+            let p = cam.project(*x);
+            p[0] >= margin_px && p[0] <= width - margin_px && p[1] >= margin_px && p[1] <= height - margin_px
+        })
+    })
+}
+
 /// A seeded layout of `count` blocks: kinds cube/bar/wedge/l_block, sides 20-60 mm, random
 /// yaw and shades ([`contrasting_shades`]), footprints (their circumscribed circles plus
-/// 15 mm) not overlapping.
-pub fn random_layout(seed: u64, count: usize, light: &Lighting) -> Vec<BlockLayout> {
+/// 15 mm) not overlapping, each seen whole by both cameras (`visible`: a facet ends at the
+/// block's edges, and the image border is none).
+pub fn random_layout(seed: u64, count: usize, light: &Lighting, visible: &dyn Fn(&BlockLayout) -> bool) -> Vec<BlockLayout> {
     const KINDS: [&str; 4] = ["cube", "bar", "wedge", "l_block"];
     let mut rng = Rng::new(seed);
     let mut blocks: Vec<BlockLayout> = Vec::new();
@@ -175,7 +199,7 @@ pub fn random_layout(seed: u64, count: usize, light: &Lighting) -> Vec<BlockLayo
             let d = (b.position_m[0] - o.position_m[0]).hypot(b.position_m[1] - o.position_m[1]);
             d > radius(&b) + radius(o) + 0.015
         });
-        if clear {
+        if clear && visible(&b) {
             blocks.push(b);
         }
     }
@@ -190,6 +214,9 @@ pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout]) 
     doc.insert("description".into(), toml::Value::String(format!("random layout, seed {seed}")));
     doc.insert("seed".into(), toml::Value::Integer(seed as i64));
     doc.remove("events");
+    if std::env::var("AA").is_ok() {
+        doc.get_mut("render").and_then(|r| r.as_table_mut()).expect("[render]").insert("antialias".into(), toml::Value::Boolean(true));
+    }
     let arr: Vec<toml::Value> = blocks
         .iter()
         .enumerate()
