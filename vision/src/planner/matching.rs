@@ -18,6 +18,9 @@
 
 use super::geom::{self, P2};
 use super::relations::{End, Relations};
+use nalgebra::Vector3;
+
+use super::projective::ProjectiveStereo;
 use super::segments::Segment;
 use crate::affine::{AffineStereo, EpipolarConstraint, FitError};
 
@@ -33,6 +36,11 @@ pub struct StereoGeometry {
     pub disparity_px: [f64; 2],
     /// The affine stereo model, when the robot coordinates of the calibration are known.
     pub model: Option<AffineStereo>,
+    /// Pinhole cameras fitted to the same calibration points (>= 6, not coplanar), when
+    /// known: robot coordinates come from these rather than from the affine model, whose
+    /// weak-perspective error is several millimetres at the simulator's distances (see
+    /// [`ProjectiveStereo`]).
+    pub projective: Option<ProjectiveStereo>,
 }
 
 impl StereoGeometry {
@@ -42,7 +50,26 @@ impl StereoGeometry {
     pub fn from_model(model: AffineStereo, margin_frac: f64, margin_px: f64) -> Self {
         let [lo, hi] = model.disparity_range_px;
         let m = margin_frac * (hi - lo) + margin_px;
-        Self { epipolar: model.epipolar(), correction: None, disparity_px: [lo - m, hi + m], model: Some(model) }
+        Self { epipolar: model.epipolar(), correction: None, disparity_px: [lo - m, hi + m], model: Some(model), projective: None }
+    }
+
+    /// From calibration points with robot coordinates (such as the simulator's cage): the
+    /// affine model as [`from_model`](Self::from_model), and the pinhole cameras for metric
+    /// reconstruction when the points allow them (>= 6, not coplanar); an error when not even
+    /// the affine model can be fitted.
+    pub fn from_calibration_points(robot_m: &[Vector3<f64>], image_px: &[[f64; 4]], margin_frac: f64, margin_px: f64) -> Result<Self, FitError> {
+        let model = AffineStereo::fit(robot_m, image_px)?;
+        Ok(Self { projective: ProjectiveStereo::fit(robot_m, image_px).ok(), ..Self::from_model(model, margin_frac, margin_px) })
+    }
+
+    /// Robot coordinates of the point seen at `w = (u, v, u', v')`: through the pinhole
+    /// cameras when known, else the affine model; `None` when uncalibrated.
+    pub fn robot_point(&self, w: &[f64; 4]) -> Option<[f64; 3]> {
+        match (&self.projective, &self.model) {
+            (Some(p), _) => Some(p.reconstruct(w).into()),
+            (None, Some(m)) => Some(m.reconstruct(w).into()),
+            (None, None) => None,
+        }
     }
 
     /// From `>= 4` correspondences `(u, v, u', v')` without robot coordinates: the epipolar
@@ -51,7 +78,7 @@ impl StereoGeometry {
         let epipolar = EpipolarConstraint::fit(points)?;
         let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| (lo.min(w[2] - w[0]), hi.max(w[2] - w[0])));
         let m = margin_frac * (hi - lo) + margin_px;
-        Ok(Self { epipolar, correction: None, disparity_px: [lo - m, hi + m], model: None })
+        Ok(Self { epipolar, correction: None, disparity_px: [lo - m, hi + m], model: None, projective: None })
     }
 
     /// The epipolar coordinates of this geometry (constraint and correction).
@@ -482,7 +509,7 @@ mod tests {
 
     /// Horizontal epipolar lines: v' = v (n = (0, −1, 0, 1)/√2), disparity in [−40, 0].
     fn rectified() -> StereoGeometry {
-        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), correction: None, disparity_px: [-40.0, 0.0], model: None }
+        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), correction: None, disparity_px: [-40.0, 0.0], model: None, projective: None }
     }
 
     #[test]

@@ -35,6 +35,7 @@ pub mod facets;
 pub mod geom;
 pub mod matching;
 pub mod planes;
+pub mod projective;
 pub mod reconstruct;
 pub mod relations;
 pub mod score;
@@ -257,7 +258,7 @@ impl Planner {
             .into_iter()
             .map(|f| {
                 let cd = f.left.iter().zip(&f.right).map(|(l, r)| reconstruct::cyclopean_disparity(*l, *r)).collect();
-                let robot = geo_used.model.as_ref().map(|m| f.left.iter().zip(&f.right).map(|(l, r)| m.reconstruct(&[l[0], l[1], r[0], r[1]]).into()).collect());
+                let robot = f.left.iter().zip(&f.right).map(|(l, r)| geo_used.robot_point(&[l[0], l[1], r[0], r[1]])).collect();
                 FacetResult { facet: f, corners_cyclopean_disparity: cd, corners_robot_m: robot }
             })
             .collect();

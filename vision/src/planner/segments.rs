@@ -400,7 +400,7 @@ impl SegmentDetector {
         // real edge at an angle strays further within a few pixels.
         let shorter = a.0.length().min(b.0.length());
         let jog = shorter < JOG_PIECE_PX && a.0.angle_to(&b.0) < JOG_MAX_ANGLE_DEG.to_radians();
-        if !jog && a.0.angle_to(&b.0) > self.config.merge_angle_deg.to_radians() {
+        if !jog && a.0.angle_to(&b.0) > self.merge_angle(shorter) {
             return None;
         }
         let mut sums = a.1;
@@ -411,6 +411,15 @@ impl SegmentDetector {
         let tol = if jog { JOG_PX } else { self.config.split_tol_px };
         let ok = [a.0.p0, a.0.p1, b.0.p0, b.0.p1].iter().all(|p| seg.line_distance(*p).abs() <= tol);
         (ok && seg.rms_px <= self.config.max_rms_px).then_some((seg, sums, g, a.3 + b.3))
+    }
+
+    /// Largest angle between two pieces that may merge, the shorter `shorter_px` long,
+    /// radians: `merge_angle_deg`, or more for a short piece, whose direction is uncertain
+    /// (on a weak edge, noise tilts a 12 px piece by several degrees): as much as turns it
+    /// by `split_tol_px` over its length. The joint fit must still pass near all four ends.
+    fn merge_angle(&self, shorter_px: f64) -> f64 {
+        let cfg = &self.config;
+        cfg.merge_angle_deg.to_radians().max((cfg.split_tol_px / shorter_px.max(1.0)).atan())
     }
 
     /// Merges collinear pieces of different chains whose facing ends are within
@@ -450,7 +459,7 @@ impl SegmentDetector {
                         if !(-1.0..=gap).contains(&g) || geom::dist(a.p1, b.p0) > gap + 1.0 {
                             continue;
                         }
-                        if a.angle_to(b) > self.config.merge_angle_deg.to_radians() || geom::dot(a.dir(), b.dir()) <= 0.0 {
+                        if a.angle_to(b) > self.merge_angle(a.length().min(b.length())) || geom::dot(a.dir(), b.dir()) <= 0.0 {
                             continue;
                         }
                         // Lateral offsets both ways within the split tolerance.
