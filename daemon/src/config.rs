@@ -240,6 +240,9 @@ pub struct PlanSettings {
     pub finger_breadth_m: f64,
     /// Widest grasp the planner accepts (the thesis's 50 mm), m.
     pub max_width_m: f64,
+    /// The grasped block's own other faces may reach this far past the contact planes
+    /// (reconstruction error) before a finger counts as colliding with them, m.
+    pub object_tolerance_m: f64,
     /// Facets facing further than this from the cameras in plan view are not grasped: the
     /// plate, normal to the jaws' closing axis, ends up as oblique as the facet, and beyond
     /// ~50° the servo's view of its marks degenerates, degrees.
@@ -266,6 +269,7 @@ impl Default for PlanSettings {
             finger_thickness_m: 0.012,
             finger_breadth_m: 0.020,
             max_width_m: 0.050,
+            object_tolerance_m: 0.008,
             max_view_angle_deg: 45.0,
             max_site_distance_m: 0.06,
             timeout_s: 20.0,
@@ -537,6 +541,7 @@ impl DaemonConfig {
             ("plan.disparity_margin_px", self.plan.disparity_margin_px),
             ("plan.mask_margin_px", self.plan.mask_margin_px),
             ("plan.arm_clearance_m", self.plan.arm_clearance_m),
+            ("plan.object_tolerance_m", self.plan.object_tolerance_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, v.to_string(), "a finite number >= 0");

@@ -40,6 +40,11 @@ pub struct PlanRequest {
     pub images: [ImageBuf; 2],
     /// The calibration: tool positions to the reference point's images (tracker pixels).
     pub model: AffineStereo,
+    /// The cage it was fitted to: tool positions (m) and reference-point images (tracker
+    /// pixels). With >= 6 points the planner reconstructs through pinhole cameras fitted to
+    /// them (the affine model alone is several mm off at 1.6 m).
+    pub cage_robot_m: Vec<Vector3<f64>>,
+    pub cage_image_px: Vec<[f64; 4]>,
     /// `tool − reference` at the calibration's yaw, robot frame, m.
     pub lever_m: [f64; 3],
     /// The gripper's image region in each view (tracker pixels), masked before planning.
@@ -128,6 +133,8 @@ pub struct PlanSummary {
     pub model: Option<serde_json::Value>,
     /// Epipolar bootstrap: RMS before and after, px.
     pub bootstrap_rms_px: Option<[f64; 2]>,
+    /// RMS residual of the pinhole cameras fitted to the cage (`None`: affine model only), px.
+    pub projective_residual_px: Option<f64>,
     pub planner_ms: f64,
     pub total_ms: f64,
 }
@@ -169,6 +176,18 @@ pub fn scene_model(model: &AffineStereo, lever_m: &[f64; 3]) -> AffineStereo {
 fn project(model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
     let w = model.m * (p + Vector3::from(*lever_m)) + model.c;
     [[w[0], w[1]], [w[2], w[3]]]
+}
+
+/// Projects a scene point through the pinhole cameras when there are any (planner pixels in,
+/// tracker pixels out), else through the affine model.
+fn project_scene(geo: &StereoGeometry, model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
+    let Some(cams) = &geo.projective else { return project(model, lever_m, p) };
+    let h = p.push(1.0);
+    let at = |cam: &nalgebra::Matrix3x4<f64>| {
+        let x = cam * h;
+        [x[0] / x[2] - PLANNER_FROM_TRACKER_PX, x[1] / x[2] - PLANNER_FROM_TRACKER_PX]
+    };
+    [at(&cams.left), at(&cams.right)]
 }
 
 fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
@@ -403,7 +422,17 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         "residual_rms_px": scene_model.residual_rms_px,
     }));
     let toward = req.model.toward_cameras();
-    let geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
+    // Pinhole cameras from the cage, for metric reconstruction: a scene point P images where
+    // the reference point does with the tool at P + L, so the cage points become the
+    // reference point's own positions, X_tool − L, seen at the planner's pixels.
+    let lever = Vector3::from(req.lever_m);
+    let points: Vec<Vector3<f64>> = req.cage_robot_m.iter().map(|x| x - lever).collect();
+    let images: Vec<[f64; 4]> = req.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
+    let mut geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
+    if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
+        geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
+    }
+    summary.projective_residual_px = geo.projective.as_ref().map(|p| p.residual_rms_px);
     let t0 = Instant::now();
     let plan = Planner::new(req.planner).plan(&req.images[0].view(), &req.images[1].view(), &geo);
     summary.planner_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -434,7 +463,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         }
     };
     let site_summary = |g: Option<&Grasp>, site: &handeye_vision::grasp::GraspSite, reason: Option<String>| {
-        let px = project(&req.model, &req.lever_m, &site.front_m);
+        let px = project_scene(&geo, &req.model, &req.lever_m, &site.front_m);
         SiteSummary {
             plan_facet: ps.facets[site.facet].plan_facet,
             width_mm: site.width_m * 1e3,
@@ -484,7 +513,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             left_px: pick(&src.left_px),
             right_px: pick(&src.right_px),
             width_m: g.site.width_m.max(0.0),
-            site_px: project(&req.model, &req.lever_m, &g.site.front_m),
+            site_px: project_scene(&geo, &req.model, &req.lever_m, &g.site.front_m),
             site_m: arr3(&g.site.front_m),
             tool_m: arr3(&g.tool_m),
         }

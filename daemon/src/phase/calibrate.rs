@@ -163,7 +163,14 @@ impl Calibrate {
                     Ok(s) => s,
                     Err(e) => return Step::Fail(format!("calibrate: unusable model: {e}")),
                 };
-                m.calibration = Some(Calibration { model, epipolar, servo_model, stats });
+                m.calibration = Some(Calibration {
+                    model,
+                    epipolar,
+                    servo_model,
+                    stats,
+                    cage_robot_m: self.robot_m.clone(),
+                    cage_image_px: self.image_px.clone(),
+                });
                 m.calibration_yaw_rad = Some(self.yaw_rad);
                 m.snapshot = Some("calibrated");
                 m.set_status("calibrated");

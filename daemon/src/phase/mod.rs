@@ -93,6 +93,10 @@ pub struct Calibration {
     pub epipolar: EpipolarConstraint,
     pub servo_model: ServoModel,
     pub stats: CalibrationStats,
+    /// The cage as measured: tool positions (robot frame, m) and the reference point's
+    /// images `(u, v, u', v')` (tracker pixels); the planner fits pinhole cameras to them.
+    pub cage_robot_m: Vec<nalgebra::Vector3<f64>>,
+    pub cage_image_px: Vec<[f64; 4]>,
 }
 
 /// Numbers of the calibration for the outcome and the report.

@@ -149,12 +149,15 @@ impl PlanPhase {
                         ..GripperModel::default()
                     },
                     max_view_angle_rad: p.max_view_angle_deg.min(90.0).to_radians(),
+                    object_tolerance_m: p.object_tolerance_m,
                     ..GraspConfig::default()
                 };
                 // Allocates once: the pair the planner works on.
                 let request = PlanRequest {
                     images: [c.left.to_owned(), c.right.to_owned()],
                     model: cal.model.clone(),
+                    cage_robot_m: cal.cage_robot_m.clone(),
+                    cage_image_px: cal.cage_image_px.clone(),
                     lever_m: [lever.x, lever.y, lever.z],
                     masks,
                     mask_margin_px: p.mask_margin_px,

@@ -27,6 +27,9 @@
 //! - The grasped facet and its edges, and the rear edge, are the *contact* surfaces: they are
 //!   left out of the finger test (a finger pressing on them is the grasp, not a collision),
 //!   and the finger rectangles start `contact_tolerance_m` outside the two contact planes.
+//! - Features of the grasped object itself (same component) count against a finger only
+//!   when they reach more than `object_tolerance_m` past a contact plane: its other faces
+//!   end there up to the reconstruction's error.
 //! - The rear edge must lie within `max_rear_drop_m` of the top edge's height (default: the
 //!   finger depth), so the fingers reach the face it bounds.
 //! - Parallel means within `parallel_tolerance_rad` (10°) in 3-D.
@@ -178,6 +181,12 @@ pub struct GraspConfig {
     pub contact_tolerance_m: f64,
     /// Largest height difference between the top edge and the rear edge at the site, metres.
     pub max_rear_drop_m: f64,
+    /// How far features of the grasped object itself may reach past the two contact planes
+    /// into the fingers' swept rectangles before they count as a collision, metres. The
+    /// object's other faces end at the contact planes up to the reconstruction's error
+    /// (a visible side face reaches as far back as the rear surface the rear edge stands
+    /// for); a face reaching much further means the object is wider than the site's width.
+    pub object_tolerance_m: f64,
     /// Largest angle, in plan view, between a facet's normal and the direction towards the
     /// viewer. Not a rule of the thesis: a gripper whose tracked face turns with the jaws
     /// (the simulator's plate is normal to the closing axis) can only be servoed onto a
@@ -196,6 +205,7 @@ impl Default for GraspConfig {
             min_overlap_m: 0.005,
             contact_tolerance_m: 0.003,
             max_rear_drop_m: 0.025,
+            object_tolerance_m: 0.003,
             max_view_angle_rad: std::f64::consts::FRAC_PI_2,
         }
     }
@@ -326,6 +336,7 @@ impl GraspConfig {
             ("min_overlap_m", self.min_overlap_m),
             ("contact_tolerance_m", self.contact_tolerance_m),
             ("max_rear_drop_m", self.max_rear_drop_m),
+            ("object_tolerance_m", self.object_tolerance_m),
         ];
         if let Some(o) = g.jaw_opening_m
             && !(o > 0.0 && o.is_finite() && o >= g.max_width_m)
@@ -411,6 +422,13 @@ fn validate(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>) -> Result<()
 }
 
 impl GraspScene {
+    fn component_of(&self, f: FeatureRef) -> usize {
+        match f {
+            FeatureRef::Facet(i) | FeatureRef::Edge(EdgeRef::Facet { facet: i, .. }) => self.facets[i].component,
+            FeatureRef::Edge(EdgeRef::Loose(i)) => self.edges[i].component,
+        }
+    }
+
     fn edge(&self, r: EdgeRef) -> &Segment3 {
         match r {
             EdgeRef::Facet { facet, edge } => &self.facets[facet].edges[edge],
@@ -596,7 +614,15 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
                     FeatureRef::Facet(i) => i == fi,
                     FeatureRef::Edge(e) => e == rear_ref || matches!(e, EdgeRef::Facet { facet, .. } if facet == fi),
                 };
-                if let Some(feature) = first_collision(scene, &frame, &fingers, front_m[2] - g.finger_depth_m, contact, &mut scratch) {
+                // Other objects against the fingers' full sweep; the grasped object's own other
+                // features with `object_tolerance_m` past the contact planes.
+                let low_water = front_m[2] - g.finger_depth_m;
+                let own = |f: FeatureRef| scene.component_of(f) == facet.component;
+                let inner_own = 0.5 * w + config.object_tolerance_m.max(config.contact_tolerance_m);
+                let own_fingers = [Rect { g: [-outer, -inner_own], h: [-half_b, half_b] }, Rect { g: [inner_own, outer], h: [-half_b, half_b] }];
+                let hit = first_collision(scene, &frame, &fingers, low_water, |f| contact(f) || own(f), &mut scratch)
+                    .or_else(|| if inner_own < outer { first_collision(scene, &frame, &own_fingers, low_water, |f| contact(f) || !own(f), &mut scratch) } else { None });
+                if let Some(feature) = hit {
                     rejected.push(reject(Some(site), RejectReason::FingerCollision { feature }));
                     continue;
                 }

@@ -328,3 +328,24 @@ fn facets_turned_from_the_viewer_can_be_left_out() {
     assert_eq!(limited.chosen.unwrap().site.facet, 1);
     assert!(matches!(reasons_for(&limited, 0)[..], [RejectReason::TurnedFromViewer { angle_rad }] if (angle_rad.to_degrees() - 50.0).abs() < 1e-9));
 }
+
+#[test]
+fn the_grasped_objects_own_faces_collide_only_past_the_object_tolerance() {
+    // Cube A's front and top faces, and its right side face (y = 0.04) reconstructed 6 mm
+    // too deep: it pokes 6 mm past the back face, into the rear finger's sweep (the fingers
+    // are 20 mm broad along the edge, so shift the side face to the middle, y = 0.02, to
+    // put it under them).
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.push(facet(vec![p(0.04, 0.02, 0.0), p(-0.006, 0.02, 0.0), p(-0.006, 0.02, 0.04), p(0.04, 0.02, 0.04)], 0));
+    let s = scene(f, vec![]);
+    let strict = plan(&s);
+    assert!(reasons_for(&strict, 0).iter().any(|r| matches!(r, RejectReason::FingerCollision { feature: FeatureRef::Facet(2) })), "{:?}", strict.rejected);
+    assert!(strict.candidates.iter().all(|g| g.site.facet != 0));
+    let tolerant = plan_grasps(&s, None, &GraspConfig { object_tolerance_m: 0.008, ..Default::default() }).unwrap();
+    assert!(tolerant.candidates.iter().any(|g| g.site.facet == 0 && (g.site.width_m - 0.04).abs() < 1e-12), "{:?}", tolerant.rejected);
+    // Another object 6 mm behind the back face still collides at that tolerance.
+    let mut f = block([0.0, 0.04], [0.0, 0.04], 0.04, 0);
+    f.push(facet(vec![p(-0.006, -0.02, 0.0), p(-0.006, 0.06, 0.0), p(-0.006, 0.06, 0.04), p(-0.006, -0.02, 0.04)], 3));
+    let other = plan_grasps(&scene(f, vec![]), None, &GraspConfig { object_tolerance_m: 0.008, ..Default::default() }).unwrap();
+    assert!(other.candidates.iter().all(|g| g.site.facet != 0));
+}
