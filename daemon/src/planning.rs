@@ -54,6 +54,8 @@ pub struct PlanRequest {
     pub indicated_m: Option<[f64; 3]>,
     /// Features entirely above this height are the arm, m.
     pub max_height_m: f64,
+    /// Features closer than this in 3-D are one object, m.
+    pub join_m: f64,
     /// A grasp whose centre is farther than this from the indicated point (plan view) is
     /// not on the block the operator meant: no grasp then, m.
     pub max_distance_m: f64,
@@ -440,7 +442,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.matches = plan.matches.len();
     summary.planes = plan.planes.len();
     summary.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
-    let ps = scene_from_plan(&plan, toward, req.max_height_m);
+    let ps = scene_from_plan(&plan, toward, req.max_height_m, req.join_m);
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
     for (fi, f) in plan.facets.iter().enumerate() {

@@ -38,6 +38,16 @@ impl InProcess {
         Self { runner, daemon, facet, hint, buf: vec![0; n], frame: 0 }
     }
 
+    /// The same loop with the daemon planning its own grasp (no hint): the indicated point
+    /// is the scenario's (`[task] point_m`, or the named target's centre).
+    pub fn planning(scenario: Scenario, cfg: DaemonConfig) -> Self {
+        let point = scenario.indicated_point_m();
+        let mut run = Self::new(scenario, cfg.clone());
+        run.daemon = HardLoop::new(cfg, None).unwrap();
+        run.daemon.set_indicated_point(Some(point));
+        run
+    }
+
     /// One frame: render, robot state, daemon cycle, command, physics. Returns the command.
     /// `inside` runs around the daemon's cycle only (e.g. to count its allocations).
     pub fn step_with(&mut self, inside: &mut dyn FnMut(&mut dyn FnMut())) -> RobotCommand {

@@ -164,6 +164,7 @@ impl PlanPhase {
                     indicated_m: m.indicated_m,
                     max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
                     max_distance_m: p.max_site_distance_m,
+                    join_m: p.join_m,
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,

@@ -8,11 +8,14 @@
 //!   description): the planner extends segment ends to their junctions, so the sides reach the
 //!   corners where the matched segments stop short of them, and every facet has a complete
 //!   boundary to find its top edge on.
-//! - **Components**: the planner joins facets that share a segment or meet at a junction seen
-//!   in both views; a loose segment joins the component of any facet member (or other loose
-//!   segment) it meets at such a junction ("friends"), so that an edge seen behind a facet is
-//!   on its object, as the rear-edge rule needs. A loose segment that meets nothing is an
-//!   object of its own: an obstacle only.
+//! - **Components** (the thesis's "3-D connected component"): the planner joins facets that
+//!   share a segment or meet at a junction seen in both views; a loose segment joins the
+//!   component of any facet member (or other loose segment) it meets at such a junction
+//!   ("friends"). Then, in 3-D, within `join_m`: a loose segment whose end touches a facet's
+//!   outline or another segment joins it, and two facets sharing an edge (two corners of one
+//!   on the other's outline) are one object. So an edge seen behind a facet is on its object,
+//!   as the rear-edge rule needs, even where a junction was seen in one view only. A loose
+//!   segment that meets nothing is an object of its own: an obstacle only.
 //! - **Height limit**: features whose lowest point is above `max_height_m` are dropped. The
 //!   arm parked above the workspace is in view while the planner looks; it moves away before
 //!   the grasp, so it is no obstacle (the gripper itself is masked out of the images before
@@ -50,6 +53,9 @@ pub struct PlannedScene {
     pub dropped_facets: Vec<usize>,
 }
 
+/// Facets larger than this (m²) are not joined to what touches them (see the module docs).
+const MAX_JOIN_AREA_M2: f64 = 0.01;
+
 struct UnionFind(Vec<usize>);
 
 impl UnionFind {
@@ -66,6 +72,19 @@ impl UnionFind {
             self.0[a.max(b)] = a.min(b);
         }
     }
+}
+
+/// Distance of point `p` from segment `a`-`b`.
+fn point_segment_m(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let d = b - a;
+    let l2 = d.norm_squared();
+    let t = if l2 > 0.0 { ((p - a).dot(&d) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    (a + d * t - p).norm()
+}
+
+/// Distance of point `p` from a closed polygon's outline.
+fn point_outline_m(p: &Vector3<f64>, poly: &[Vector3<f64>]) -> f64 {
+    (0..poly.len()).map(|i| point_segment_m(p, &poly[i], &poly[(i + 1) % poly.len()])).fold(f64::INFINITY, f64::min)
 }
 
 fn v3(p: &[f64; 3]) -> Vector3<f64> {
@@ -100,8 +119,9 @@ fn area_m2(poly: &[Vector3<f64>]) -> f64 {
 /// Builds the grasp scene of `plan` (which must have been made with an affine model, so that
 /// facets and matches carry robot coordinates; without one the scene is empty).
 /// `toward_viewer` is [`crate::affine::AffineStereo::toward_cameras`]; features entirely above
-/// `max_height_m` are left out (see the module docs).
-pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f64) -> PlannedScene {
+/// `max_height_m` are left out; features closer than `join_m` in 3-D are one object (see the
+/// module docs).
+pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f64, join_m: f64) -> PlannedScene {
     let n_facets = plan.facets.len();
     let n_matches = plan.matches.len();
     // Nodes: plan facets, then matches. Facets with the planner's component id are joined.
@@ -172,6 +192,37 @@ pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f
         edges.push((uf.find(n_facets + mi), Segment3::new(a, b)));
         edge_matches.push(mi);
     }
+    // 3-D contact: loose segments touching facets or each other, facets sharing an edge.
+    // Facets bigger than any block face (a table top, a wall) join nothing: everything
+    // touches them.
+    let joinable: Vec<bool> = facets.iter().map(|(_, f)| area_m2(&f.polygon_m) <= MAX_JOIN_AREA_M2).collect();
+    if join_m > 0.0 {
+        for (ei, (_, e)) in edges.iter().enumerate() {
+            let node = n_facets + edge_matches[ei];
+            for (fk, (_, f)) in facets.iter().enumerate() {
+                if joinable[fk] && [e.a_m, e.b_m].iter().any(|p| point_outline_m(p, &f.polygon_m) <= join_m) {
+                    uf.union(node, sources[fk].plan_facet);
+                }
+            }
+            for (ej, (_, o)) in edges.iter().enumerate().skip(ei + 1) {
+                let touch = [e.a_m, e.b_m].iter().any(|p| point_segment_m(p, &o.a_m, &o.b_m) <= join_m)
+                    || [o.a_m, o.b_m].iter().any(|p| point_segment_m(p, &e.a_m, &e.b_m) <= join_m);
+                if touch {
+                    uf.union(node, n_facets + edge_matches[ej]);
+                }
+            }
+        }
+        for (fa, (_, a)) in facets.iter().enumerate() {
+            for (fb, (_, b)) in facets.iter().enumerate().skip(fa + 1) {
+                let shared = |x: &SceneFacet, y: &SceneFacet| x.polygon_m.iter().filter(|p| point_outline_m(p, &y.polygon_m) <= join_m).count() >= 2;
+                if joinable[fa] && joinable[fb] && (shared(a, b) || shared(b, a)) {
+                    uf.union(sources[fa].plan_facet, sources[fb].plan_facet);
+                }
+            }
+        }
+    }
+    let facets: Vec<(usize, SceneFacet)> = facets.into_iter().zip(&sources).map(|((_, f), src)| (uf.find(src.plan_facet), f)).collect();
+    let edges: Vec<(usize, Segment3)> = edges.into_iter().zip(&edge_matches).map(|((_, e), &mi)| (uf.find(n_facets + mi), e)).collect();
     // Dense component ids in order of first appearance.
     let mut ids: Vec<usize> = Vec::new();
     let mut id_of = |root: usize| match ids.iter().position(|&r| r == root) {
@@ -203,7 +254,7 @@ mod tests {
         let toward = model.toward_cameras();
         let geo = StereoGeometry::from_model(model, 0.5, 10.0);
         let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
-        (scene_from_plan(&plan, toward, 1.0), plan)
+        (scene_from_plan(&plan, toward, 1.0, 0.004), plan)
     }
 
     /// The grasp rules on real planner output: a 40 x 30 x 45 mm box seen by the synthetic
@@ -256,11 +307,31 @@ mod tests {
         }
     }
 
+    /// Two boxes whose facets the planner gave separate components (a junction seen in one
+    /// view only) are still one object when they share an edge in 3-D; apart, they are two.
+    #[test]
+    fn facets_sharing_an_edge_in_3d_are_one_object() {
+        let b = BoxSpec { center_m: [0.0, 0.0, 0.0225], size_m: [0.040, 0.030, 0.045], yaw_rad: 0.5 };
+        let (_, mut plan) = plan_scene(vec![b], 3);
+        for (i, f) in plan.facets.iter_mut().enumerate() {
+            f.facet.component = i as u32;
+        }
+        plan.friends.clear();
+        for m in plan.matches.iter_mut() {
+            m.facets.truncate(1); // a crease on two facets would join them
+        }
+        let apart = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 1.0, 0.0);
+        let comps: std::collections::BTreeSet<usize> = apart.scene.facets.iter().map(|f| f.component).collect();
+        assert_eq!(comps.len(), 3, "without 3-D joining, as the planner said");
+        let joined = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 1.0, 0.004);
+        assert!(joined.scene.facets.iter().all(|f| f.component == joined.scene.facets[0].component));
+    }
+
     #[test]
     fn features_above_the_height_limit_are_left_out() {
         let b = BoxSpec { center_m: [0.0, 0.0, 0.0225], size_m: [0.040, 0.030, 0.045], yaw_rad: 0.5 };
         let (_, plan) = plan_scene(vec![b], 3);
-        let low = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 0.030);
+        let low = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 0.030, 0.004);
         // The top face (z = 45 mm) goes; the sides reach down to the table and stay.
         assert_eq!(low.scene.facets.len(), 2, "{:?}", low.dropped_facets);
         assert_eq!(low.dropped_facets.len(), 1);
