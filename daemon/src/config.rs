@@ -238,7 +238,9 @@ pub struct PlanSettings {
     /// along the edge, m.
     pub finger_thickness_m: f64,
     pub finger_breadth_m: f64,
-    /// Widest grasp the planner accepts (the thesis's 50 mm), m.
+    /// Widest grasp the planner accepts, m. The thesis's gripper took 50 mm; the
+    /// simulator's opens 80 mm, and 64 mm leaves each finger 8 mm to spare: a 60 mm bar can
+    /// then be taken across its length when its long faces turn too far from the cameras.
     pub max_width_m: f64,
     /// The grasped block's own other faces may reach this far past the contact planes
     /// (reconstruction error) before a finger counts as colliding with them, m.
@@ -272,7 +274,7 @@ impl Default for PlanSettings {
             arm_clearance_m: 0.02,
             finger_thickness_m: 0.012,
             finger_breadth_m: 0.020,
-            max_width_m: 0.050,
+            max_width_m: 0.064,
             object_tolerance_m: 0.008,
             max_view_angle_deg: 60.0,
             join_m: 0.004,
@@ -388,6 +390,11 @@ pub struct SafetyConfig {
     pub state_stale_frames: u32,
     /// In phases that need a tracker, a confidence score below this counts as lost.
     pub min_tracker_score: f64,
+    /// The same for the target trackers. Lower: a block face 25-30 mm across is ~30 px,
+    /// and one of its sides often has little contrast with the neighbouring face (0.5-0.6
+    /// while tracking well); a face hidden or lost drops far below it, or the tracker
+    /// reports itself lost.
+    pub min_target_score: f64,
 }
 
 impl Default for SafetyConfig {
@@ -398,6 +405,7 @@ impl Default for SafetyConfig {
             max_state_jump_m: 0.05,
             state_stale_frames: 6,
             min_tracker_score: 0.6,
+            min_target_score: 0.45,
         }
     }
 }

@@ -124,6 +124,8 @@ pub struct PlanSummary {
     /// site existed (counted in `rejected_by_reason` only).
     pub rejected_sites: Vec<SiteSummary>,
     pub rejected_by_reason: BTreeMap<String, usize>,
+    /// Facets and top edges that failed a rule before a site existed: `(plan facet, reason)`.
+    pub facet_rejections: Vec<(usize, String)>,
     pub indicated_m: Option<[f64; 3]>,
     /// The indicated point in both views, tracker pixels.
     pub indicated_px: Option<[[f64; 2]; 2]>,
@@ -482,6 +484,15 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     for r in &grasps.rejected {
         let name = reason_name(&r.reason);
         *summary.rejected_by_reason.entry(name.to_string()).or_insert(0) += 1;
+        if r.site.is_none() {
+            let detail = match r.reason {
+                RejectReason::FacetNotVertical { tilt_rad } => format!("{name} ({:.0}°)", tilt_rad.to_degrees()),
+                RejectReason::TurnedFromViewer { angle_rad } => format!("{name} ({:.0}°)", angle_rad.to_degrees()),
+                RejectReason::TopEdgeTooSteep { slope_rad } => format!("{name} ({:.0}°)", slope_rad.to_degrees()),
+                _ => name.to_string(),
+            };
+            summary.facet_rejections.push((ps.facets[r.facet].plan_facet, detail));
+        }
         if let Some(site) = &r.site {
             let detail = match r.reason {
                 RejectReason::FingerCollision { feature } | RejectReason::BodyCollision { feature } => {

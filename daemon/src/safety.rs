@@ -51,8 +51,9 @@ pub fn check_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, t
                 Some(TrackState::Tracking) => {}
             }
             let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
-            if score.is_nan() || score < cfg.min_tracker_score {
-                return Err(format!("{name} tracker ({side} view) confidence {score:.2} < {}", cfg.min_tracker_score));
+            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
+            if score.is_nan() || score < min {
+                return Err(format!("{name} tracker ({side} view) confidence {score:.2} < {min}"));
             }
         }
     }
