@@ -249,6 +249,10 @@ pub struct PlanSettings {
     /// plate, normal to the jaws' closing axis, ends up as oblique as the facet (an L-block
     /// face at 55° was servoed to 0.7 mm and 2.2°), degrees.
     pub max_view_angle_deg: f64,
+    /// Hypothesise the vertical faces the planner missed below the front edges of top faces,
+    /// down to the table (`grasp.table_z_m`): blocks rest on the table, and a face towards
+    /// the cameras under a seen top edge is seen too; the target trackers check it.
+    pub hypothesise_front_faces: bool,
     /// Reconstructed features closer than this in 3-D belong to one object (the thesis's
     /// "3-D connected component"; the planner's own components need a junction seen in both
     /// views), m.
@@ -277,6 +281,7 @@ impl Default for PlanSettings {
             max_width_m: 0.064,
             object_tolerance_m: 0.008,
             max_view_angle_deg: 60.0,
+            hypothesise_front_faces: true,
             join_m: 0.004,
             max_site_distance_m: 0.06,
             timeout_s: 20.0,

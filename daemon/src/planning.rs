@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::grasp::{plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
+use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
 use nalgebra::{Vector3, Vector4};
@@ -56,6 +56,9 @@ pub struct PlanRequest {
     pub max_height_m: f64,
     /// Features closer than this in 3-D are one object, m.
     pub join_m: f64,
+    /// Hypothesise the vertical faces below top faces' front edges that the planner missed,
+    /// down to the table at this height (robot frame, m); `None`: do not.
+    pub front_faces_to_table_z_m: Option<f64>,
     /// A grasp whose centre is farther than this from the indicated point (plan view) is
     /// not on the block the operator meant: no grasp then, m.
     pub max_distance_m: f64,
@@ -91,12 +94,16 @@ pub struct FacetSummary {
     pub corners_m: Option<Vec<[f64; 3]>>,
     /// Object id in the grasp scene (`None`: left out of it).
     pub component: Option<usize>,
+    /// Hypothesised below the front edge of top face `plan_facet`, not seen as a facet.
+    pub hypothesised: bool,
 }
 
 /// A grasp site, as the report shows it.
 #[derive(Debug, Clone, Serialize)]
 pub struct SiteSummary {
     pub plan_facet: usize,
+    /// The site's facet was hypothesised below the top face `plan_facet`.
+    pub hypothesised_facet: bool,
     pub width_mm: f64,
     pub site_m: [f64; 3],
     pub centre_m: [f64; 3],
@@ -444,7 +451,16 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.matches = plan.matches.len();
     summary.planes = plan.planes.len();
     summary.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
-    let ps = scene_from_plan(&plan, toward, req.max_height_m, req.join_m);
+    let mut ps = scene_from_plan(&plan, toward, req.max_height_m, req.join_m);
+    let planned_facets = ps.facets.len();
+    if let Some(table_z) = req.front_faces_to_table_z_m {
+        let project = |p: &Vector3<f64>| {
+            let px = project_scene(&geo, &req.model, &req.lever_m, p);
+            let ok = px.iter().flatten().all(|v| v.is_finite());
+            ok.then(|| px.map(|q| [q[0] + PLANNER_FROM_TRACKER_PX, q[1] + PLANNER_FROM_TRACKER_PX]))
+        };
+        hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.join_m);
+    }
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
     for (fi, f) in plan.facets.iter().enumerate() {
@@ -455,6 +471,17 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             right_px: to_tracker(&f.facet.right),
             corners_m: f.corners_robot_m.clone(),
             component,
+            hypothesised: false,
+        });
+    }
+    for (k, src) in ps.facets.iter().enumerate().skip(planned_facets) {
+        summary.facets.push(FacetSummary {
+            plan_facet: src.plan_facet,
+            left_px: to_tracker(&src.left_px),
+            right_px: to_tracker(&src.right_px),
+            corners_m: Some(ps.scene.facets[k].polygon_m.iter().map(arr3).collect()),
+            component: Some(ps.scene.facets[k].component),
+            hypothesised: true,
         });
     }
     let indicated = req.indicated_m.map(Vector3::from);
@@ -470,6 +497,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         let px = project_scene(&geo, &req.model, &req.lever_m, &site.front_m);
         SiteSummary {
             plan_facet: ps.facets[site.facet].plan_facet,
+            hypothesised_facet: ps.facets[site.facet].hypothesised,
             width_mm: site.width_m * 1e3,
             site_m: arr3(&site.front_m),
             centre_m: arr3(&site.centre_m),

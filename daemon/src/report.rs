@@ -174,6 +174,7 @@ const CANDIDATE: Rgb<u8> = Rgb([255, 255, 255]);
 const REJECTED: Rgb<u8> = Rgb([255, 200, 0]);
 const MASK: Rgb<u8> = Rgb([90, 90, 160]);
 const INDICATED: Rgb<u8> = Rgb([255, 0, 255]);
+const HYPOTHESISED: Rgb<u8> = Rgb([255, 150, 150]);
 
 fn polygon(img: &mut RgbImage, poly: &[[f64; 2]], dx: f64, colour: Rgb<u8>) {
     for i in 0..poly.len() {
@@ -197,7 +198,7 @@ fn ring(img: &mut RgbImage, p: [f64; 2], dx: f64, r: f64, colour: Rgb<u8>) {
 
 /// The plan on both views (as the planner saw them, the gripper masked): the masked region
 /// (blue-grey), every facet in its own colour (grey when it was left out of the grasp
-/// scene), the target facet's tracker outline (red), rejected sites (yellow crosses),
+/// scene, pink when hypothesised below a top face's front edge), the target facet's tracker outline (red), rejected sites (yellow crosses),
 /// candidate sites (white rings), the chosen site (red ring and cross) and the indicated
 /// point (magenta cross).
 pub fn plan_overlay(p: &crate::planning::PlanOutput) -> RgbImage {
@@ -216,7 +217,13 @@ pub fn plan_overlay(p: &crate::planning::PlanOutput) -> RgbImage {
         let dx = f64::from(k as u32 * w);
         polygon(&mut img, &s.masks_px[k], dx, MASK);
         for (i, f) in s.facets.iter().enumerate() {
-            let colour = if f.component.is_some() { FACET_COLOURS[i % FACET_COLOURS.len()] } else { Rgb([120, 120, 120]) };
+            let colour = if f.hypothesised {
+                HYPOTHESISED
+            } else if f.component.is_some() {
+                FACET_COLOURS[i % FACET_COLOURS.len()]
+            } else {
+                Rgb([120, 120, 120])
+            };
             polygon(&mut img, if k == 0 { &f.left_px } else { &f.right_px }, dx, colour);
         }
         if let Some(t) = &p.target {

@@ -468,7 +468,7 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
     let caption = |name: &str| -> String {
         let label = name.trim_end_matches(".png").trim_start_matches(|c: char| c.is_ascii_digit() || c == '_').replace('_', " ");
         match label.as_str() {
-            "plan" => "the plan: the planner's facets (colours; grey: left out), rejected sites (yellow), candidates (white rings), the chosen site and its facet (red), the indicated point (magenta), the masked gripper (blue)".into(),
+            "plan" => "the plan: the planner's facets (colours; grey: left out; pink: hypothesised below a top face), rejected sites (yellow), candidates (white rings), the chosen site and its facet (red), the indicated point (magenta), the masked gripper (blue)".into(),
             other => format!("{other}: tracked contours (gripper green, target red, lost yellow)"),
         }
     };

@@ -165,6 +165,7 @@ impl PlanPhase {
                     max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
                     max_distance_m: p.max_site_distance_m,
                     join_m: p.join_m,
+                    front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,

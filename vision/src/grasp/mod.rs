@@ -47,7 +47,7 @@ pub mod scene;
 #[cfg(test)]
 mod tests;
 
-pub use scene::{scene_from_plan, FacetSource, PlannedScene};
+pub use scene::{hypothesise_front_faces, scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};
 use thiserror::Error;

@@ -33,8 +33,11 @@ use crate::planner::Plan;
 /// A facet of the scene with where it came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FacetSource {
-    /// Index into `Plan::facets`.
+    /// Index into `Plan::facets` (for a hypothesised facet: the top face it hangs from).
     pub plan_facet: usize,
+    /// Not seen as a facet but hypothesised below a top face's front edge
+    /// ([`hypothesise_front_faces`]).
+    pub hypothesised: bool,
     /// The facet's outline in the left and right image, in the planner's pixel convention,
     /// vertex for vertex with the scene facet's `polygon_m` (same first vertex, same order).
     pub left_px: Vec<[f64; 2]>,
@@ -176,7 +179,7 @@ pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f
         let n = polygon_m.len();
         let edges = (0..n).map(|k| Segment3::new(polygon_m[k], polygon_m[(k + 1) % n])).filter(|s| s.length_m() >= 1e-6).collect();
         facets.push((uf.find(fi), SceneFacet { polygon_m, edges, component: 0 }));
-        sources.push(FacetSource { plan_facet: fi, left_px: rotate(&f.facet.left), right_px: rotate(&f.facet.right) });
+        sources.push(FacetSource { plan_facet: fi, hypothesised: false, left_px: rotate(&f.facet.left), right_px: rotate(&f.facet.right) });
     }
     let mut edges = Vec::new();
     let mut edge_matches = Vec::new();
@@ -235,6 +238,86 @@ pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f
     let facets: Vec<SceneFacet> = facets.into_iter().map(|(root, f)| SceneFacet { component: id_of(root), ..f }).collect();
     let edges: Vec<SceneEdge> = edges.into_iter().map(|(root, segment)| SceneEdge { segment, component: id_of(root) }).collect();
     PlannedScene { scene: GraspScene { facets, edges, toward_viewer }, facets: sources, edge_matches, dropped_facets: dropped }
+}
+
+/// Newell normal (unit) of a 3-D polygon, if it has an area.
+fn unit_normal(poly: &[Vector3<f64>]) -> Option<Vector3<f64>> {
+    let mut n = Vector3::zeros();
+    for i in 0..poly.len() {
+        n += poly[i].cross(&poly[(i + 1) % poly.len()]);
+    }
+    n.try_normalize(1e-12)
+}
+
+/// Hypothesises the vertical faces the planner missed below the front edges of top faces:
+/// a block resting on the table has a vertical face under each outline edge of its top, and
+/// where that face looks towards the viewer the cameras see it. The thesis infers the
+/// unseen rear face of a grasp from a parallel edge; this infers a seen-but-unmatched front
+/// face from the top face's edge and the table's height (known like the cage, in robot
+/// coordinates). The face's image outline comes from `project` (a robot point to both
+/// views, planner pixels), so the target trackers can be put on it and will find out
+/// whether it is there.
+///
+/// For every facet within `max_tilt_rad` of horizontal and at least `min_height_m` above
+/// `table_z_m`, and every side of it whose outward horizontal normal is within
+/// `max_view_angle_rad` of the viewer, unless a facet already runs along that side (its
+/// outline within `join_m` of both ends): a quadrilateral from the side down to the table,
+/// on the top face's object. Returns how many were added.
+pub fn hypothesise_front_faces(
+    ps: &mut PlannedScene,
+    project: &dyn Fn(&Vector3<f64>) -> Option<[[f64; 2]; 2]>,
+    table_z_m: f64,
+    min_height_m: f64,
+    max_tilt_rad: f64,
+    max_view_angle_rad: f64,
+    join_m: f64,
+) -> usize {
+    let toward = Vector3::new(ps.scene.toward_viewer.x, ps.scene.toward_viewer.y, 0.0);
+    let Some(toward) = toward.try_normalize(1e-12) else { return 0 };
+    let mut added = Vec::new();
+    for (fi, f) in ps.scene.facets.iter().enumerate() {
+        let Some(n) = unit_normal(&f.polygon_m) else { continue };
+        if n.z.abs() < max_tilt_rad.cos() {
+            continue;
+        }
+        let k = f.polygon_m.len();
+        let centroid = f.polygon_m.iter().sum::<Vector3<f64>>() / k as f64;
+        for i in 0..k {
+            let (a, b) = (f.polygon_m[i], f.polygon_m[(i + 1) % k]);
+            if a.z.min(b.z) - table_z_m < min_height_m || (b - a).xy().norm() < 0.005 {
+                continue;
+            }
+            let along = (b - a).xy().normalize();
+            let mut out = Vector3::new(along.y, -along.x, 0.0);
+            if out.xy().dot(&(0.5 * (a + b) - centroid).xy()) < 0.0 {
+                out = -out;
+            }
+            if out.dot(&toward) < max_view_angle_rad.cos() {
+                continue;
+            }
+            let covered = ps.scene.facets.iter().enumerate().any(|(j, g)| {
+                j != fi && unit_normal(&g.polygon_m).is_some_and(|m| m.z.abs() < 0.5) && [a, b].iter().all(|p| point_outline_m(p, &g.polygon_m) <= join_m)
+            });
+            if covered {
+                continue;
+            }
+            let (a0, b0) = (Vector3::new(a.x, a.y, table_z_m), Vector3::new(b.x, b.y, table_z_m));
+            // Bottom corners first: the facet frame anchors at a corner with both sides long.
+            let polygon_m = vec![a0, b0, b, a];
+            let Some(px) = polygon_m.iter().map(project).collect::<Option<Vec<[[f64; 2]; 2]>>>() else { continue };
+            let edges = (0..4).map(|e| Segment3::new(polygon_m[e], polygon_m[(e + 1) % 4])).collect();
+            added.push((
+                SceneFacet { polygon_m, edges, component: f.component },
+                FacetSource { plan_facet: ps.facets[fi].plan_facet, hypothesised: true, left_px: px.iter().map(|p| p[0]).collect(), right_px: px.iter().map(|p| p[1]).collect() },
+            ));
+        }
+    }
+    let n = added.len();
+    for (facet, source) in added {
+        ps.scene.facets.push(facet);
+        ps.facets.push(source);
+    }
+    n
 }
 
 #[cfg(test)]
@@ -325,6 +408,49 @@ mod tests {
         assert_eq!(comps.len(), 3, "without 3-D joining, as the planner said");
         let joined = scene_from_plan(&plan, Vector3::new(0.0, -1.0, 1.0), 1.0, 0.004);
         assert!(joined.scene.facets.iter().all(|f| f.component == joined.scene.facets[0].component));
+    }
+
+    /// The planner's side faces taken away, the box's top face still hangs two faces down to
+    /// the table where they face the viewer: where the real ones are, and grasped as they
+    /// would be.
+    #[test]
+    fn front_faces_hypothesised_below_a_top_face_stand_where_the_sides_are() {
+        let b = BoxSpec { center_m: [0.0, 0.0, 0.0225], size_m: [0.040, 0.030, 0.045], yaw_rad: 0.5 };
+        let synth = SynthScene::new(vec![b]);
+        let pair = synth.render(3);
+        let robot: Vec<Vector3<f64>> = pair.cage.iter().map(|c| Vector3::from(c.0)).collect();
+        let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
+        let model = AffineStereo::fit(&robot, &image).unwrap();
+        let toward = model.toward_cameras();
+        let geo = StereoGeometry::from_model(model.clone(), 0.5, 10.0);
+        let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
+        let full = scene_from_plan(&plan, toward, 1.0, 0.004);
+        let mut ps = full.clone();
+        let keep: Vec<usize> = (0..ps.scene.facets.len()).filter(|&i| unit_normal(&ps.scene.facets[i].polygon_m).unwrap().z.abs() > 0.9).collect();
+        assert_eq!(keep.len(), 1, "one top face");
+        ps.scene.facets = keep.iter().map(|&i| full.scene.facets[i].clone()).collect();
+        ps.facets = keep.iter().map(|&i| full.facets[i].clone()).collect();
+        let cams = &pair.cameras;
+        let project = |p: &Vector3<f64>| Some([cams[0].project([p.x, p.y, p.z]), cams[1].project([p.x, p.y, p.z])]);
+        let n = hypothesise_front_faces(&mut ps, &project, 0.0, 0.01, 20f64.to_radians(), 80f64.to_radians(), 0.004);
+        assert_eq!(n, 2, "two sides face the viewer");
+        // Each hypothesised face lies in the plane of a true side face, within a few mm.
+        let truth: Vec<([f64; 3], [[f64; 3]; 4])> = b.faces();
+        for f in ps.scene.facets.iter().skip(1) {
+            let best = truth
+                .iter()
+                .filter(|(n, _)| n[2].abs() < 0.1)
+                .map(|(n, c)| f.polygon_m.iter().map(|p| (p - Vector3::from(c[0])).dot(&Vector3::from(*n)).abs()).fold(0.0, f64::max))
+                .fold(f64::INFINITY, f64::min);
+            assert!(best < 0.004, "hypothesised face {:.1} mm off the nearest side", best * 1e3);
+        }
+        // And the grasp planner finds the same grasps as on the planner's own side faces.
+        let grasps = plan_grasps(&ps.scene, None, &GraspConfig::default()).unwrap();
+        assert_eq!(grasps.candidates.len(), 2, "{:?}", grasps.rejected);
+        assert!(ps.facets.iter().skip(1).all(|s| s.hypothesised && s.left_px.len() == 4));
+        // Where the planner did find the sides, nothing is hypothesised.
+        let mut again = full.clone();
+        assert_eq!(hypothesise_front_faces(&mut again, &project, 0.0, 0.01, 20f64.to_radians(), 80f64.to_radians(), 0.004), 0);
     }
 
     #[test]
