@@ -32,6 +32,8 @@ pub struct DaemonOutcome {
     pub plan: Option<PlanSummary>,
     /// The loop while the planner worked: frames answered, gripper tracker updates.
     pub planning: Option<PlanningStats>,
+    /// Targets tried: the plan's next grasp site is tried when one cannot be acquired.
+    pub target_attempts: u32,
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
@@ -64,6 +66,7 @@ impl DaemonOutcome {
             target_source: l.mission.target.as_ref().map(|t| t.source),
             plan: l.mission.plan.clone(),
             planning: l.mission.planning,
+            target_attempts: l.mission.target_attempts,
             grip_width_mm: l.mission.grip_width_m.map(|w| w * 1e3),
             stop_frame_id: l.stopped_at_frame(),
             recoveries: l.recoveries,

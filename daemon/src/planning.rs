@@ -156,6 +156,8 @@ pub struct PlanOutput {
     pub summary: PlanSummary,
     /// `None` when no site survived the rules.
     pub target: Option<PlannedTarget>,
+    /// The other candidates near the indicated point, next best first.
+    pub alternatives: Vec<PlannedTarget>,
     /// The images as the planner saw them (masked), for the report.
     pub images: [ImageBuf; 2],
 }
@@ -335,6 +337,38 @@ pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> u
     count
 }
 
+fn to_tracker_px(p: [f64; 2]) -> [f64; 2] {
+    [p[0] - PLANNER_FROM_TRACKER_PX, p[1] - PLANNER_FROM_TRACKER_PX]
+}
+
+/// Share of the segment `a`-`b` (tracker pixels) along which the image steps by at least
+/// 12 grey levels across it, within 3 px of the line (a projected edge is off by a pixel or
+/// two): at each pixel along it, the largest difference of the grey levels 2 px either side
+/// of points up to 3 px off the line. 0 for a segment off the image or under 4 px.
+pub fn edge_support(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len = dx.hypot(dy);
+    if !(len >= 4.0) {
+        return 0.0;
+    }
+    let (nx, ny) = (-dy / len, dx / len);
+    let at = |x: f64, y: f64| -> Option<f64> {
+        let (xi, yi) = (x.round(), y.round());
+        (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width && (yi as usize) < img.height).then(|| f64::from(img.get(xi as usize, yi as usize)))
+    };
+    let steps = len.floor() as usize;
+    let mut hits = 0;
+    for i in 0..=steps {
+        let t = i as f64 / steps as f64;
+        let (x, y) = (a[0] + t * dx, a[1] + t * dy);
+        let step = |d: f64| -> Option<f64> { Some((at(x + (d + 2.0) * nx, y + (d + 2.0) * ny)? - at(x + (d - 2.0) * nx, y + (d - 2.0) * ny)?).abs()) };
+        if (-3..=3).filter_map(|d| step(f64::from(d))).any(|s| s >= 12.0) {
+            hits += 1;
+        }
+    }
+    hits as f64 / (steps + 1) as f64
+}
+
 /// Indices of the vertices kept by Douglas-Peucker on a closed polygon (tolerance `tol`),
 /// at least three, in order.
 pub fn simplify_closed(poly: &[[f64; 2]], tol: f64) -> Vec<usize> {
@@ -460,6 +494,23 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             ok.then(|| px.map(|q| [q[0] + PLANNER_FROM_TRACKER_PX, q[1] + PLANNER_FROM_TRACKER_PX]))
         };
         hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.join_m);
+        // A hypothesised face must show its bottom edge, against the table, in both views:
+        // one hung from a top edge where the block does not go straight down (the tall leg
+        // of an L over its low leg) has none there.
+        let mut k = planned_facets;
+        while k < ps.facets.len() {
+            let src = &ps.facets[k];
+            let seen = [(&req.images[0], &src.left_px), (&req.images[1], &src.right_px)]
+                .iter()
+                .all(|(img, poly)| edge_support(img, to_tracker_px(poly[0]), to_tracker_px(poly[1])) >= 0.6);
+            if seen {
+                k += 1;
+            } else {
+                ps.facets.remove(k);
+                ps.scene.facets.remove(k);
+                *summary.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
+            }
+        }
     }
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
@@ -490,7 +541,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         Err(e) => {
             summary.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
             summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
-            return PlanOutput { summary, target: None, images: req.images };
+            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images };
         }
     };
     let site_summary = |g: Option<&Grasp>, site: &handeye_vision::grasp::GraspSite, reason: Option<String>| {
@@ -545,7 +596,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         summary.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
     }
     summary.chosen = chosen.as_ref().and_then(|_| summary.candidates.first().cloned());
-    let target = chosen.map(|g| {
+    let planned = |g: &Grasp| {
         let src = &ps.facets[g.site.facet];
         let cyclopean: Vec<[f64; 2]> = src.left_px.iter().zip(&src.right_px).map(|(l, r)| [(l[0] + r[0]) / 2.0, (l[1] + r[1]) / 2.0]).collect();
         let keep = tracker_order(&cyclopean, &simplify_closed(&cyclopean, 1.5));
@@ -558,9 +609,11 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             site_m: arr3(&g.site.front_m),
             tool_m: arr3(&g.tool_m),
         }
-    });
+    };
+    let target = chosen.as_ref().map(planned);
+    let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
     summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
-    PlanOutput { summary, target, images: req.images }
+    PlanOutput { summary, target, alternatives, images: req.images }
 }
 
 #[cfg(test)]
@@ -593,6 +646,23 @@ mod tests {
         assert_eq!(mask_and_fill(&mut img, &[[1.0, 1.0], [2.0, 2.0]], 1.0), 0);
         assert_eq!(mask_and_fill(&mut img, &[[f64::NAN, 1.0], [2.0, 2.0], [3.0, 1.0]], 1.0), 0);
         assert_eq!(img, before);
+    }
+
+    #[test]
+    fn edge_support_sees_a_step_and_not_a_flat_face() {
+        // Left half 40, right half 120: a vertical edge at x = 29.5.
+        let mut img = ImageBuf::new(60, 40);
+        for y in 0..40 {
+            for x in 0..60 {
+                img.set(x, y, if x < 30 { 40 } else { 120 });
+            }
+        }
+        assert!(edge_support(&img, [29.5, 5.0], [29.5, 35.0]) > 0.95);
+        assert!(edge_support(&img, [27.0, 5.0], [27.0, 35.0]) > 0.95, "2.5 px off the edge still finds it");
+        assert!(edge_support(&img, [10.0, 5.0], [10.0, 35.0]) < 0.05, "inside a flat region");
+        assert!(edge_support(&img, [5.0, 20.0], [55.0, 20.0]) < 0.05, "along the edge's normal");
+        assert_eq!(edge_support(&img, [10.0, 5.0], [10.0, 6.0]), 0.0, "too short");
+        assert_eq!(edge_support(&img, [-100.0, 5.0], [-100.0, 35.0]), 0.0, "off the image");
     }
 
     #[test]

@@ -54,7 +54,7 @@ pub struct ConvergedPlacement {
     pub tool_z_mm: f64,
 }
 
-/// The facet the daemon's target trackers were put on, from ground truth.
+/// The facet the daemon's target trackers were (last) put on, from ground truth.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TargetedFacet {
     pub frame: u64,
@@ -107,6 +107,8 @@ pub struct DaemonWatch {
     pub plan: PlanWatch,
     #[serde(skip)]
     facet: Option<HintFacet>,
+    #[serde(skip)]
+    target_present: bool,
     #[serde(skip)]
     last_phase: Option<u32>,
     #[serde(skip)]
@@ -167,7 +169,12 @@ impl DaemonWatch {
                 self.plan.gripper_updates_while_planning = [now[0].saturating_sub(first[0]), now[1].saturating_sub(first[1])];
             }
         }
-        if self.targeted.is_none() && t.tracker_state[2] != 0 && t.tracker_state[3] != 0 {
+        // Identified when the target trackers appear, and again if they are put on another
+        // facet (the daemon may give a target up for the plan's next grasp site).
+        let present = t.tracker_state[2] != 0 && t.tracker_state[3] != 0;
+        let appeared = present && !self.target_present;
+        self.target_present = present;
+        if appeared {
             let poly = |i: usize| -> Vec<[f64; 2]> {
                 t.tracker_corners_px[i].iter().filter(|c| c[0].is_finite() && c[1].is_finite()).map(|c| [f64::from(c[0]), f64::from(c[1])]).collect()
             };

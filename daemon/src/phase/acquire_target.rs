@@ -27,6 +27,7 @@ impl AcquireTarget {
         }
         if !self.started {
             self.started = true;
+            m.target_attempts += 1;
             let Some(hint) = m.target.as_ref() else {
                 return Step::Fail("acquire_target: no target (no operator hint and no plan)".into());
             };
@@ -87,8 +88,11 @@ impl AcquireTarget {
         for view in View::ALL {
             let Some(t) = m.trackers.get(Role::Target, view) else { return Step::Fail("acquire_target: tracker missing".into()) };
             let score = t.confidence().score;
-            if score < m.cfg.target.min_score {
-                return Step::Fail(format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {}", m.cfg.target.min_score));
+            // The servo will need the safety's score; the arm is still until then, so a shaky
+            // tracker is judged here, at the end, rather than stopping the run on its way in.
+            let min = m.cfg.target.min_score.max(m.cfg.safety.min_target_score);
+            if !(score >= min) {
+                return Step::Fail(format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {min}"));
             }
         }
         // The planned site, in each tracker's template coordinates.

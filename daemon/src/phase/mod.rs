@@ -223,6 +223,11 @@ pub struct Mission {
     pub indicated_m: Option<[f64; 3]>,
     /// What the planner found (`None` before the plan phase, or with a hint).
     pub plan: Option<crate::planning::PlanSummary>,
+    /// The plan's other grasp sites near the indicated point, next best first: tried in turn
+    /// when the target trackers cannot hold the chosen facet or it turns out not vertical.
+    pub alternatives: Vec<TargetSpec>,
+    /// Targets tried (1 when the first one served).
+    pub target_attempts: u32,
     /// The plan with its images, for the report (taken by whoever writes it).
     pub plan_report: Option<Box<crate::planning::PlanOutput>>,
     pub planning: Option<PlanningStats>,
@@ -258,6 +263,8 @@ impl Mission {
             hint,
             indicated_m: None,
             plan: None,
+            alternatives: Vec::new(),
+            target_attempts: 0,
             plan_report: None,
             planning: None,
             trackers: StereoTrackerSet::new(),
@@ -272,6 +279,22 @@ impl Mission {
             snapshot: None,
             grip_width_m: None,
         })
+    }
+
+    /// Gives up the current target (removing its trackers) for the plan's next grasp site;
+    /// `None` when there is none left.
+    pub fn next_target(&mut self, why: &str) -> Option<TargetSpec> {
+        if self.alternatives.is_empty() {
+            return None;
+        }
+        let next = self.alternatives.remove(0);
+        tracing::warn!(%why, left = self.alternatives.len(), "target given up: trying the plan's next grasp site");
+        for view in View::ALL {
+            self.trackers.remove(Role::Target, view);
+        }
+        self.set_status("acquire target: trying the next grasp site");
+        self.snapshot = Some("target_given_up");
+        Some(next)
     }
 
     /// Sets the status text without allocating (when it fits the buffer).
@@ -344,8 +367,10 @@ pub fn reject_text(code: u32) -> &'static str {
 /// Which phases need which trackers tracking (a lost one stops the arm).
 pub fn needs_trackers(phase: Phase) -> (bool, bool) {
     match phase {
-        Phase::Calibrate | Phase::Plan => (true, false),
-        Phase::AcquireTarget | Phase::Servo => (true, true),
+        // While the target trackers converge the arm holds still: acquire_target judges them
+        // itself at the end (and may try the plan's next grasp site instead).
+        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => (true, false),
+        Phase::Servo => (true, true),
         _ => (false, false),
     }
 }
@@ -396,6 +421,15 @@ impl PhaseState {
             Self::Lift(p) => p.step(m, c),
             Self::Done { .. } | Self::Failed | Self::Stopped => return Step::Stay(Cmd::HOLD),
         };
+        // A target that cannot be acquired or served: the plan's next grasp site, if any.
+        if let Step::Fail(reason) = &step
+            && matches!(self, Self::AcquireTarget(_))
+            && let Some(next) = m.next_target(reason)
+        {
+            *self = Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index));
+            m.target = Some(next);
+            return Step::Stay(Cmd::HOLD);
+        }
         if let Step::Next(_) = step {
             *self = match self {
                 Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.frame_index)),
@@ -405,7 +439,13 @@ impl PhaseState {
                 Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),
-                    Err(reason) => return Step::Fail(reason),
+                    Err(reason) => match m.next_target(&reason) {
+                        Some(next) => {
+                            m.target = Some(next);
+                            Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index))
+                        }
+                        None => return Step::Fail(reason),
+                    },
                 },
                 Self::Servo(p) => Self::Grasp(grasp::Grasp::new(c.frame_index, p.approach_m)),
                 Self::Grasp(_) => Self::Lift(grasp::Lift::new(c.frame_index)),

@@ -201,6 +201,7 @@ impl PlanPhase {
                 });
                 let summary = out.summary.clone();
                 let target = out.target.clone();
+                m.alternatives = out.alternatives.iter().map(|a| target_spec(a, m)).collect();
                 m.plan = Some(summary.clone());
                 m.plan_report = Some(out);
                 let Some(t) = target else {
