@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use e2e_support::{run, scenario, TempDir};
+use e2e_support::{one_at_a_time, run, scenario_without_antialias, TempDir};
 use handeye_wire::message::{MessageEvent, MessageSubscriber};
 use handeye_wire::{monotonic_ns, robot_flags, CommandKind, Domain, Phase, RobotCommand, RobotState, Telemetry, WireNode};
 
@@ -34,9 +34,11 @@ fn handeye(args: &[&str], dir: &Path, name: &str) -> Kid {
 }
 
 /// Starts a lockstep simulator of pick_cube and a daemon on its hint, in a fresh domain.
+/// The daemon keeps its default 100 ms stale-frame guard (what catches a killed simulator),
+/// so the simulator renders without multisampling to stay well inside it.
 fn start_pair(dir: &Path, domain: &Domain, sim_extra: &[&str]) -> (Kid, Kid) {
     let hint = dir.join("hint.json");
-    let sc = scenario("pick_cube.toml");
+    let sc = scenario_without_antialias("pick_cube.toml", dir);
     let mut args = vec!["sim", sc.to_str().unwrap(), "--lockstep", "--domain", domain.name(), "--wait-daemon-ms", "30000", "--hint-out", hint.to_str().unwrap()];
     args.extend_from_slice(sim_extra);
     let sim = handeye(&args, dir, "sim");
@@ -84,6 +86,7 @@ fn an_occluder_hiding_the_target_stops_the_arm_within_three_frames() {
 
 #[test]
 fn killing_the_simulator_mid_servo_stops_the_daemon_within_200_ms() {
+    let _one = one_at_a_time();
     let dir = TempDir::new("kill-sim");
     let domain = Domain::unique("killsim");
     let node = WireNode::create(&domain, "test").unwrap();
@@ -132,6 +135,7 @@ fn killing_the_simulator_mid_servo_stops_the_daemon_within_200_ms() {
 
 #[test]
 fn killing_the_daemon_lets_the_watchdog_stop_the_arm() {
+    let _one = one_at_a_time();
     let dir = TempDir::new("kill-daemon");
     let domain = Domain::unique("killdaemon");
     let node = WireNode::create(&domain, "test").unwrap();
