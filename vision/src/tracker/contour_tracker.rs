@@ -7,7 +7,8 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_side, Appearance, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
+use super::batch::{ContourSearch, SearchSettings};
+use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -85,8 +86,10 @@ pub struct ContourTracker {
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
     fit: FitBuffers,
-    /// Working space of the search of one side.
-    line: SideScratch,
+    /// Side index of each point.
+    side_of: Vec<u16>,
+    /// The search of all the points' normals.
+    lines: ContourSearch,
 }
 
 impl ContourTracker {
@@ -140,7 +143,8 @@ impl ContourTracker {
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
-            line: SideScratch::with_capacity(n),
+            side_of: Vec::with_capacity(n),
+            lines: ContourSearch::with_capacity(n),
         };
         tracker.restart(frame);
         tracker
@@ -168,6 +172,11 @@ impl ContourTracker {
         self.ref_inside.clear();
         self.ref_inside.resize(n, -1.0);
         self.fit.resize(n);
+        self.side_of.clear();
+        self.side_of.resize(n, 0);
+        for (s, edge) in self.template.edges.iter().enumerate() {
+            self.side_of[edge.first..edge.first + edge.count].fill(s as u16);
+        }
     }
 
     /// Re-initialises from a new polygon (image pixels): a new template, fresh state. Does not
@@ -291,29 +300,30 @@ impl ContourTracker {
                 (*pos_x, *pos_y) = (p.x, p.y);
                 (*rel_x, *rel_y) = (p.x - frame.origin.x, p.y - frame.origin.y);
             }
-            // ...their searches (with the appearance cue)...
-            let signs = match self.config.edge_sign {
-                EdgeSign::Either => SignRule::Fixed(0),
-                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
-                EdgeSign::Learned => {
-                    SignRule::Learned { reference: &self.ref_contrast[range.clone()], min_contrast: min_contrast as f32 }
-                }
-            };
-            let appearance = Appearance {
-                reference: &self.ref_inside[range.clone()],
-                gain: self.config.appearance_px_per_grey as f32,
-                tolerance: self.config.appearance_tolerance as f32,
-            };
-            let (xs, ys) = (&self.pos_x[range.clone()], &self.pos_y[range.clone()]);
-            let found = &mut self.edges[range.clone()];
-            search_side(image, &side, xs, ys, search_px, signs, appearance, min_contrast, &mut self.line, found);
             // ...and the fit's copy.
             self.nrm_x[range.clone()].fill(normal[0]);
             self.nrm_y[range.clone()].fill(normal[1]);
             let geometry = (normal[0] as f32, normal[1] as f32, np as f32);
-            self.fit.set_side(edge.first, &self.rel_x[range.clone()], &self.rel_y[range.clone()], geometry);
-            self.fit.set_side_candidates(edge.first, &self.edges[range]);
+            self.fit.set_side(edge.first, &self.rel_x[range.clone()], &self.rel_y[range], geometry);
         }
+        // The searches of all points (with the appearance cue).
+        let n = self.template.points().len();
+        let settings = SearchSettings {
+            search_px,
+            signs: match self.config.edge_sign {
+                EdgeSign::Either => SignRule::Fixed(0),
+                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
+                EdgeSign::Learned => SignRule::Learned { reference: &self.ref_contrast, min_contrast: min_contrast as f32 },
+            },
+            appearance: Appearance {
+                reference: &self.ref_inside,
+                gain: self.config.appearance_px_per_grey as f32,
+                tolerance: self.config.appearance_tolerance as f32,
+            },
+            min_contrast,
+        };
+        self.lines.search(image, &self.sides, &self.side_of, &self.pos_x[..n], &self.pos_y[..n], &settings, &mut self.edges[..n]);
+        self.fit.set_side_candidates(0, &self.edges[..n]);
     }
 
     /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.

@@ -53,6 +53,7 @@
 //!   same order (tests compare them bit for bit), and a portable fallback serves other
 //!   processors; the tracker's results do not depend on the path taken.
 
+mod batch;
 mod config;
 mod contour;
 mod contour_tracker;

@@ -25,9 +25,9 @@ pub const MAX_CANDIDATES: usize = 4;
 pub const MAX_SEARCH_PX: f64 = 40.0;
 /// Extra samples read beyond the search window at each end, for the gradient's neighbours
 /// and the intensities just inside and outside a peak.
-const PAD: usize = 4;
+pub(crate) const PAD: usize = 4;
 /// Most samples each side of the base pixel inside the window: `(40 + 0.71) · √2`.
-const MAX_HALF: usize = 58;
+pub(crate) const MAX_HALF: usize = 58;
 /// Longest search line: the window, one more sample each side for rounding, and the padding.
 const LINE_MAX: usize = 2 * (MAX_HALF + 1 + PAD) + 1;
 /// Most samples in a window (`k_lo..=k_hi`), rounded up to whole 16-sample chunks.
@@ -120,7 +120,7 @@ impl PointEdges {
 /// rounding instruction) and without the saturating conversion's checks. Callers pass
 /// finite values of magnitude below 2^31 (checked once per point).
 #[inline(always)]
-fn floor_to_isize(x: f64) -> isize {
+pub(crate) fn floor_to_isize(x: f64) -> isize {
     debug_assert!(x.is_finite() && x.abs() < 2147483648.0);
     // SAFETY: `x` is finite and within isize's range (see above), which is all
     // `to_int_unchecked` requires.
@@ -130,7 +130,7 @@ fn floor_to_isize(x: f64) -> isize {
 
 /// `ceil` as an integer, likewise.
 #[inline(always)]
-fn ceil_to_isize(x: f64) -> isize {
+pub(crate) fn ceil_to_isize(x: f64) -> isize {
     -floor_to_isize(-x)
 }
 
@@ -211,7 +211,7 @@ pub(crate) enum SignRule<'a> {
 
 impl SignRule<'_> {
     #[inline]
-    fn sign(&self, i: usize) -> i32 {
+    pub(crate) fn sign(&self, i: usize) -> i32 {
         match *self {
             SignRule::Fixed(s) => s,
             SignRule::Learned { reference, min_contrast } => {
