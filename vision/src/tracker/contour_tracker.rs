@@ -144,7 +144,7 @@ impl ContourTracker {
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
             side_of: Vec::with_capacity(n),
-            lines: ContourSearch::with_capacity(n),
+            lines: ContourSearch::new(),
         };
         tracker.restart(frame);
         tracker
@@ -322,8 +322,8 @@ impl ContourTracker {
             },
             min_contrast,
         };
-        self.lines.search(image, &self.sides, &self.side_of, &self.pos_x[..n], &self.pos_y[..n], &settings, &mut self.edges[..n]);
-        self.fit.set_side_candidates(0, &self.edges[..n]);
+        let fit = self.fit.candidate_slots();
+        self.lines.search(image, &self.sides, &self.side_of, &self.pos_x[..n], &self.pos_y[..n], &settings, &mut self.edges[..n], Some(fit));
     }
 
     /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.

@@ -221,6 +221,11 @@ impl FitBuffers {
         }
     }
 
+    /// Where the search writes the candidates directly: offsets and penalties, slot-major.
+    pub fn candidate_slots(&mut self) -> super::batch::FitSlots<'_> {
+        super::batch::FitSlots { h: &mut self.cand_h, penalty: &mut self.cand_pen, stride: self.lanes }
+    }
+
     /// Point `i`'s candidate edges (at most [`MAX_CANDIDATES`]): offsets and penalties.
     #[inline]
     pub fn set_candidates(&mut self, i: usize, candidates: &[Candidate]) {
