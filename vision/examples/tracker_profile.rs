@@ -56,6 +56,9 @@ fn main() {
     if let Some(v) = env("TRACKER_REFINE_SEARCH_PX") {
         config.refine_search_px = v;
     }
+    if let Some(v) = env("TRACKER_COARSE_STRIDE") {
+        config.coarse_stride = v as usize;
+    }
     if let Some(v) = env("TRACKER_POINTS") {
         config.points = v as usize;
     }

@@ -21,7 +21,7 @@
 //! compares them on random images, geometries and polarity rules).
 
 use super::search::{
-    ceil_to_isize, floor_to_isize, Appearance, Candidate, PointEdges, SideGeometry, SignRule, MAX_CANDIDATES, MAX_HALF,
+    Appearance, Candidate, PointEdges, SideGeometry, SignRule, MAX_CANDIDATES, MAX_HALF,
     PAD,
 };
 use super::simd::F32x4;
@@ -174,25 +174,25 @@ impl ContourSearch {
             let count = (n - first).min(LANES);
             let range = first..first + count;
             let mut lanes = Lanes::empty();
-            let (g_lo, g_hi) = plan_and_gather(image, sides, &side_of[range.clone()], &xs[range.clone()], &ys[range.clone()], first, settings, &mut self.tables, &mut lanes);
+            let block = BlockInput { image, sides, side_of: &side_of[range.clone()], xs: &xs[range.clone()], ys: &ys[range.clone()], first };
             let fit = fit.as_mut().map(|f| (&mut *f.h, &mut *f.penalty, f.stride, first));
             let out = &mut out[range];
             #[cfg(target_arch = "x86_64")]
             if self.avx2 {
                 // SAFETY: the processor has AVX2 (checked at construction).
-                unsafe { block_avx2(&mut self.tables, &lanes, g_lo, g_hi, settings, out, fit) };
+                unsafe { block_avx2(&block, &mut self.tables, &mut lanes, settings, out, fit) };
                 continue;
             }
-            block_plain(&mut self.tables, &lanes, g_lo, g_hi, settings, out, fit);
+            block_plain(&block, &mut self.tables, &mut lanes, settings, out, fit);
         }
     }
 }
 
-/// Places each lane's line as `search_side` does, records its window in `lanes` and copies
-/// the window's samples (and three more at each end) into its row of `tables.lines`.
-/// Returns the rows gathered in any lane (`lo > hi` for none).
+/// Places each lane's line as `search_side` does (sixteen lanes at a time in f64), records
+/// its window in `lanes` and copies the window's samples (and three more at each end) into
+/// its row of `tables.lines`. Returns the rows gathered in any lane (`lo > hi` for none).
 #[allow(clippy::too_many_arguments)]
-#[inline(never)]
+#[inline(always)]
 fn plan_and_gather(
     image: &ImageView<'_>,
     sides: &[SideGeometry],
@@ -204,12 +204,21 @@ fn plan_and_gather(
     tables: &mut Tables,
     lanes: &mut Lanes,
 ) -> (usize, usize) {
-    let (w, h, stride) = (image.width() as isize, image.height() as isize, image.stride() as isize);
+    let count = xs.len();
+    assert!(count <= LANES && ys.len() == count && side_of.len() == count, "one block of lines");
+    let (w, h, stride) = (image.width() as f64, image.height() as f64, image.stride() as isize);
     let data = image.data();
     let search_px = settings.search_px;
-    let (mut gathered_lo, mut gathered_hi) = (ROWS, 0usize);
-    for (l, ((&side, &x), &y)) in side_of.iter().zip(xs).zip(ys).enumerate() {
-        let side = &sides[side as usize];
+    // Each lane's point and side (lanes beyond `count` get a point that fails the checks).
+    let (mut x, mut y) = ([f64::NAN; LANES], [f64::NAN; LANES]);
+    let (mut n0, mut n1, mut inv) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
+    let (mut reach, mut horizontal, mut n_axis) = ([0.0f64; LANES], [false; LANES], [1.0f64; LANES]);
+    for l in 0..count {
+        let side = &sides[side_of[l] as usize];
+        (x[l], y[l]) = (xs[l], ys[l]);
+        (n0[l], n1[l], inv[l], n_axis[l]) = (side.normal[0], side.normal[1], side.inv_n_axis, side.n_axis);
+        reach[l] = (side.half + 1 + PAD) as f64;
+        horizontal[l] = side.horizontal;
         let i = first + l;
         let axis_sign: i8 = if side.n_axis >= 0.0 { 1 } else { -1 };
         lanes.axis_sign[l] = axis_sign;
@@ -217,49 +226,67 @@ fn plan_and_gather(
         if settings.appearance.gain > 0.0 {
             lanes.reference[l] = settings.appearance.reference.get(i).copied().unwrap_or(-1.0);
         }
+    }
+    // The base pixel, whether the line lies inside the image, the base pixel's normal offset
+    // from the point and the window of offsets within ±search_px (the operations of
+    // `search_side`, lane by lane).
+    let (mut ok, mut base_x, mut base_y, mut o_lo, mut o_hi) = ([false; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    let pad = PAD as f64;
+    for l in 0..LANES {
         // Also false for NaN.
-        if !(x.abs() <= 1e8 && y.abs() <= 1e8) {
-            continue;
-        }
-        let reach = (side.half + 1 + PAD) as isize;
-        let (bxi, byi) = (floor_to_isize(x + 0.5), floor_to_isize(y + 0.5));
+        let finite = x[l].abs() <= 1e8 && y[l].abs() <= 1e8;
+        let (px, py) = if finite { (x[l], y[l]) } else { (0.0, 0.0) };
+        let (bx, by) = ((px + 0.5).floor(), (py + 0.5).floor());
+        (base_x[l], base_y[l]) = (bx, by);
         let (along, across, along_size, across_size) =
-            if side.horizontal { (bxi, byi, w, h) } else { (byi, bxi, h, w) };
-        if !(across >= 0 && across < across_size && along - reach >= 0 && along + reach < along_size) {
+            if horizontal[l] { (bx, by, w, h) } else { (by, bx, h, w) };
+        let inside = across >= 0.0 && across < across_size && along - reach[l] >= 0.0 && along + reach[l] < along_size;
+        let h0 = n0[l] * (bx - px) + n1[l] * (by - py);
+        let (k_a, k_b) = ((-search_px - h0) * inv[l], (search_px - h0) * inv[l]);
+        let lo = k_a.min(k_b).ceil().max(pad - reach[l]);
+        let hi = k_a.max(k_b).floor().min(reach[l] - pad);
+        ok[l] = finite & inside;
+        lanes.outside[l] = !(finite & inside);
+        (o_lo[l], o_hi[l]) = (lo, hi);
+        ok[l] &= lo <= hi;
+        lanes.h0[l] = h0 as f32;
+        lanes.step_h[l] = n_axis[l] as f32;
+    }
+    let (mut gathered_lo, mut gathered_hi) = (ROWS, 0usize);
+    for l in 0..count {
+        if !ok[l] {
             continue;
         }
-        lanes.outside[l] = false;
-        let h0 = side.normal[0] * (bxi as f64 - x) + side.normal[1] * (byi as f64 - y);
-        let (k_a, k_b) = ((-search_px - h0) * side.inv_n_axis, (search_px - h0) * side.inv_n_axis);
-        // Window offsets from the base pixel (the line's samples k_lo..=k_hi, less reach).
-        let o_lo = ceil_to_isize(k_a.min(k_b)).max(PAD as isize - reach);
-        let o_hi = floor_to_isize(k_a.max(k_b)).min(reach - PAD as isize);
-        if o_lo > o_hi {
-            continue;
-        }
-        let (r_lo, r_hi) = (ORIGIN + o_lo, ORIGIN + o_hi);
+        let (r_lo, r_hi) = (ORIGIN + o_lo[l] as isize, ORIGIN + o_hi[l] as isize);
         lanes.lo[l] = r_lo as i16;
         lanes.hi[l] = r_hi as i16;
-        lanes.h0[l] = h0 as f32;
-        lanes.step_h[l] = side.n_axis as f32;
         // The window's samples and three more at each end (a peak reads three either side).
         let (g_lo, g_hi) = ((r_lo - 3) as usize, (r_hi + 3) as usize);
         gathered_lo = gathered_lo.min(g_lo);
         gathered_hi = gathered_hi.max(g_hi);
-        let step = if side.horizontal { 1 } else { stride };
-        let start = byi * stride + bxi + (g_lo as isize - ORIGIN) * step;
-        let count = g_hi - g_lo + 1;
-        let line = &mut tables.lines[l][g_lo..=g_hi];
-        if side.horizontal {
-            line.copy_from_slice(&data[start as usize..start as usize + count]);
+        let step = if horizontal[l] { 1 } else { stride };
+        let start = base_y[l] as isize * stride + base_x[l] as isize + (g_lo as isize - ORIGIN) * step;
+        let samples = g_hi - g_lo + 1;
+        // The line lies inside the image (checked above), and these samples inside the line.
+        assert!(start >= 0 && (start as usize + (samples - 1) * step as usize) < data.len(), "search line outside the image");
+        let line = &mut tables.lines[l];
+        if horizontal[l] {
+            // Whole 16-byte chunks where the image and the row have room for them.
+            let chunks = samples.div_ceil(16);
+            if start as usize + 16 * chunks <= data.len() && g_lo + 16 * chunks <= ROWS {
+                for c in 0..chunks {
+                    let at = start as usize + 16 * c;
+                    line[g_lo + 16 * c..g_lo + 16 * c + 16].copy_from_slice(&data[at..at + 16]);
+                }
+            } else {
+                line[g_lo..=g_hi].copy_from_slice(&data[start as usize..start as usize + samples]);
+            }
         } else {
-            // The line lies inside the image (checked above) and these samples inside the line.
-            assert!(start >= 0 && (start as usize + (count - 1) * stride as usize) < data.len(), "column outside the image");
-            // SAFETY: the samples read are start + j · stride for j < count, inside `data`
+            // SAFETY: the samples read are start + j · stride for j < samples, inside `data`
             // (asserted above).
             unsafe {
                 let mut src = data.as_ptr().offset(start);
-                for b in line.iter_mut() {
+                for b in &mut line[g_lo..=g_hi] {
                     *b = *src;
                     src = src.wrapping_offset(stride);
                 }
@@ -269,43 +296,54 @@ fn plan_and_gather(
     (gathered_lo, gathered_hi)
 }
 
+/// One block's lines.
+struct BlockInput<'a, 'b> {
+    image: &'a ImageView<'b>,
+    sides: &'a [SideGeometry],
+    side_of: &'a [u16],
+    xs: &'a [f64],
+    ys: &'a [f64],
+    first: usize,
+}
+
+type FitOut<'a> = Option<(&'a mut [f32], &'a mut [f32], usize, usize)>;
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn block_avx2(
+    input: &BlockInput<'_, '_>,
     tables: &mut Tables,
-    lanes: &Lanes,
-    g_lo: usize,
-    g_hi: usize,
+    lanes: &mut Lanes,
     settings: &SearchSettings<'_>,
     out: &mut [PointEdges],
-    fit: Option<(&mut [f32], &mut [f32], usize, usize)>,
+    fit: FitOut<'_>,
 ) {
-    block(tables, lanes, g_lo, g_hi, settings, out, fit);
+    block(input, tables, lanes, settings, out, fit);
 }
 
 fn block_plain(
+    input: &BlockInput<'_, '_>,
     tables: &mut Tables,
-    lanes: &Lanes,
-    g_lo: usize,
-    g_hi: usize,
+    lanes: &mut Lanes,
     settings: &SearchSettings<'_>,
     out: &mut [PointEdges],
-    fit: Option<(&mut [f32], &mut [f32], usize, usize)>,
+    fit: FitOut<'_>,
 ) {
-    block(tables, lanes, g_lo, g_hi, settings, out, fit);
+    block(input, tables, lanes, settings, out, fit);
 }
 
-/// One block: transpose, scan, select, refine, write out.
+/// One block: place and gather, transpose, scan, select, refine, write out.
 #[inline(always)]
 fn block(
+    input: &BlockInput<'_, '_>,
     tables: &mut Tables,
-    lanes: &Lanes,
-    g_lo: usize,
-    g_hi: usize,
+    lanes: &mut Lanes,
     settings: &SearchSettings<'_>,
     out: &mut [PointEdges],
-    fit: Option<(&mut [f32], &mut [f32], usize, usize)>,
+    fit: FitOut<'_>,
 ) {
+    let (g_lo, g_hi) =
+        plan_and_gather(input.image, input.sides, input.side_of, input.xs, input.ys, input.first, settings, tables, lanes);
     let top = if g_lo <= g_hi {
         transpose(tables, g_lo, g_hi);
         scan(tables, lanes, g_lo + 2, g_hi - 2, settings.min_contrast);
@@ -379,7 +417,7 @@ fn scan(tables: &mut Tables, lanes: &Lanes, lo: usize, hi: usize, min_contrast: 
         either[l] = -((lanes.mode[l] == 0) as i16);
     }
     for r in lo - 1..=hi + 1 {
-        let (before, after) = (tables.t[r - 1], tables.t[r + 1]);
+        let (before, after) = (&tables.t[r - 1], &tables.t[r + 1]);
         let (mut d, mut s) = ([0i16; LANES], [0i16; LANES]);
         for l in 0..LANES {
             d[l] = after[l] as i16 - before[l] as i16;
@@ -393,7 +431,7 @@ fn scan(tables: &mut Tables, lanes: &Lanes, lo: usize, hi: usize, min_contrast: 
     // negative one-sided score can be no peak's neighbour that matters: a peak scores >= 1.
     let below = min_contrast.clamp(1, 256) as i16 - 1;
     for r in lo..=hi {
-        let (prev, here, next) = (tables.s[r - 1], tables.s[r], tables.s[r + 1]);
+        let (prev, here, next) = (&tables.s[r - 1], &tables.s[r], &tables.s[r + 1]);
         let tag = 127 - r as i16;
         let mut key = [0i16; LANES];
         for l in 0..LANES {
@@ -401,7 +439,7 @@ fn scan(tables: &mut Tables, lanes: &Lanes, lo: usize, hi: usize, min_contrast: 
             key[l] = peak & (here[l] << 7 | tag);
         }
         tables.k[r] = key;
-        let (u2, u3, d2, d3) = (tables.t[r + 2], tables.t[r + 3], tables.t[r - 2], tables.t[r - 3]);
+        let (u2, u3, d2, d3) = (&tables.t[r + 2], &tables.t[r + 3], &tables.t[r - 2], &tables.t[r - 3]);
         let (mut up, mut down) = ([0u8; LANES], [0u8; LANES]);
         for l in 0..LANES {
             up[l] = ((u2[l] as u16 + u3[l] as u16 + 1) >> 1) as u8;
@@ -448,7 +486,7 @@ fn refine(
     top: &[[i16; LANES]; MAX_CANDIDATES],
     settings: &SearchSettings<'_>,
     out: &mut [PointEdges],
-    fit: Option<(&mut [f32], &mut [f32], usize, usize)>,
+    fit: FitOut<'_>,
 ) {
     // Per kept peak, five loads from the tables (slot-major).
     let mut a = [0.0f32; SLOTS];
@@ -512,23 +550,63 @@ fn refine(
             zero.le(reference).select(cost, zero).store_ptr(penalty.as_mut_ptr().add(k));
         }
     }
-    let mut fit = fit;
-    for (l, out) in out.iter_mut().enumerate() {
-        out.outside = lanes.outside[l];
+    // A peak interpolated just past the window's end is dropped, and the lane's later ones
+    // move up a slot.
+    let mut lanes_slipped = slipped;
+    while lanes_slipped != 0 {
+        let l = (lanes_slipped.trailing_zeros() as usize) % LANES;
         let mut kept = 0;
         for s in 0..peaks[l] as usize {
-            let k = s * LANES + l;
-            if slipped >> k & 1 == 0 {
-                out.candidates[kept] =
-                    Candidate { h_px: h_px[k], contrast: contrast[k], inside: inside[k], outside: outside[k], penalty_px: penalty[k] };
+            let (from, to) = (s * LANES + l, kept * LANES + l);
+            if slipped >> from & 1 == 0 {
+                h_px[to] = h_px[from];
+                contrast[to] = contrast[from];
+                inside[to] = inside[from];
+                outside[to] = outside[from];
+                penalty[to] = penalty[from];
                 kept += 1;
             }
         }
-        out.count = kept as u8;
-        if let Some((h, pen, stride, first)) = fit.as_mut() {
-            for (s, cand) in out.candidates.iter().enumerate() {
-                let at = s * *stride + *first + l;
-                (h[at], pen[at]) = if s < kept { (cand.h_px, cand.penalty_px) } else { (0.0, f32::INFINITY) };
+        peaks[l] = kept as u8;
+        // This lane is done, in every slot.
+        for s in 0..MAX_CANDIDATES {
+            lanes_slipped &= !(1u64 << (s * LANES + l));
+        }
+    }
+    // Slot s of lane l holds a candidate exactly when s < peaks[l].
+    for (l, out) in out.iter_mut().enumerate() {
+        out.outside = lanes.outside[l];
+        out.count = peaks[l];
+        for (s, cand) in out.candidates[..peaks[l] as usize].iter_mut().enumerate() {
+            let k = s * LANES + l;
+            *cand = Candidate { h_px: h_px[k], contrast: contrast[k], inside: inside[k], outside: outside[k], penalty_px: penalty[k] };
+        }
+    }
+    if let Some((h, pen, stride, first)) = fit {
+        let count = out.len();
+        let quads = count / 4 * 4;
+        let mut present_from = [0.0f32; LANES];
+        for l in 0..LANES {
+            present_from[l] = peaks[l] as f32;
+        }
+        let infinity = F32x4::splat(f32::INFINITY);
+        for s in 0..MAX_CANDIDATES {
+            let base = s * stride + first;
+            let (h, pen) = (&mut h[base..base + count], &mut pen[base..base + count]);
+            let slot = F32x4::splat(s as f32);
+            for l in (0..quads).step_by(4) {
+                let k = s * LANES + l;
+                // SAFETY: l + 4 <= count <= LANES, the length of `h` and `pen` and of the
+                // block's lane arrays; k + 4 <= SLOTS.
+                unsafe {
+                    let present = slot.lt(F32x4::load_ptr(present_from.as_ptr().add(l)));
+                    present.select(F32x4::load_ptr(h_px.as_ptr().add(k)), zero).store_ptr(h.as_mut_ptr().add(l));
+                    present.select(F32x4::load_ptr(penalty.as_ptr().add(k)), infinity).store_ptr(pen.as_mut_ptr().add(l));
+                }
+            }
+            for l in quads..count {
+                let k = s * LANES + l;
+                (h[l], pen[l]) = if s < peaks[l] as usize { (h_px[k], penalty[k]) } else { (0.0, f32::INFINITY) };
             }
         }
     }

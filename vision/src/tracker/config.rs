@@ -42,6 +42,10 @@ pub struct TrackerConfig {
     /// re-measured at the moved points, instead of a second search failed on some of those
     /// starts too. Two is the default.
     pub passes: usize,
+    /// The first of several passes searches only every `coarse_stride`-th point of each side
+    /// (1: all of them): it has to find where the contour went within the wide range, and the
+    /// last pass searches every point over the short range.
+    pub coarse_stride: usize,
     /// Half-length of the refinement passes' search, pixels.
     pub refine_search_px: f64,
     /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
@@ -119,6 +123,7 @@ impl Default for TrackerConfig {
             corner_margin: 0.06,
             search_px: 10.0,
             passes: 2,
+            coarse_stride: 1,
             refine_search_px: 4.0,
             refine_skip_px: 0.0,
             edge_sign: EdgeSign::Either,
@@ -171,6 +176,7 @@ impl TrackerConfig {
         check((0.0..0.45).contains(&self.corner_margin), "corner_margin", self.corner_margin, "0 <= x < 0.45")?;
         check(self.search_px >= 1.0 && self.search_px <= MAX_SEARCH_PX, "search_px", self.search_px, "1..=40 px")?;
         check((1..=8).contains(&self.passes), "passes", self.passes as f64, "1..=8")?;
+        check((1..=8).contains(&self.coarse_stride), "coarse_stride", self.coarse_stride as f64, "1..=8")?;
         check(
             self.refine_search_px >= 1.0 && self.refine_search_px <= MAX_SEARCH_PX,
             "refine_search_px",

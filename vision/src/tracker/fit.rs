@@ -160,6 +160,11 @@ impl FitBuffers {
         self.last = None;
     }
 
+    /// Points the buffers hold now.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
     /// Asserts the layout the four-lane loops rely on to read without bounds checks: every
     /// working array holds `lanes` values (per candidate slot), a multiple of 4.
     #[inline]
