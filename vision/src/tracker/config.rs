@@ -46,6 +46,8 @@ pub struct TrackerConfig {
     /// (1: all of them): it has to find where the contour went within the wide range, and the
     /// last pass searches every point over the short range.
     pub coarse_stride: usize,
+    pub fast_first_px: f64,
+    pub fast_first_iterations: usize,
     /// Half-length of the refinement passes' search, pixels.
     pub refine_search_px: f64,
     /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
@@ -124,6 +126,8 @@ impl Default for TrackerConfig {
             search_px: 10.0,
             passes: 2,
             coarse_stride: 1,
+            fast_first_px: 0.0,
+            fast_first_iterations: 2,
             refine_search_px: 4.0,
             refine_skip_px: 0.0,
             edge_sign: EdgeSign::Either,

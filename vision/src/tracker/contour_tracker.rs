@@ -224,7 +224,37 @@ impl ContourTracker {
         let predicted = self.filter.predict(&self.placement, dt_s);
         let mut current = predicted;
         let passes = self.config.passes;
-        for pass in 0..passes {
+        // Experiment: a short search around the prediction first; accepted when it barely
+        // moves the contour.
+        let mut skip_all = false;
+        if self.config.fast_first_px > 0.0 && self.updates > 0 {
+            let search_px = self.config.refine_search_px;
+            let searched = self.search(image, &current, search_px, 1);
+            let settings = FitSettings {
+                model: self.config.model,
+                loss: self.config.loss,
+                iterations: self.config.fast_first_iterations,
+                sigma_min_px: self.config.sigma_min_px,
+                sigma_max_px: self.config.sigma_max_px.min(search_px),
+                deformation_ridge: self.config.deformation_ridge,
+                perspective_ridge: self.config.perspective_ridge,
+            };
+            let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
+            let fit = fit_motion(&points, &settings, &mut self.fit);
+            if let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) {
+                let moved_px = self
+                    .template
+                    .corners()
+                    .iter()
+                    .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
+                    .fold(0.0, f64::max);
+                if moved_px < self.config.fast_first_px {
+                    current = moved;
+                    skip_all = true;
+                }
+            }
+        }
+        for pass in 0..if skip_all { 0 } else { passes } {
             let search_px = if pass == 0 { self.config.search_px } else { self.config.refine_search_px };
             // The first of several passes only has to find where the contour went within the
             // wide range: with `coarse_stride` > 1 a subset of the points does that (the last
