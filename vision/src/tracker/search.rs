@@ -267,9 +267,10 @@ pub(crate) fn search_point(
 /// needs are gathered (the strided loads of all points in one burst, and written well before
 /// they are read back); then each window is scanned: scores and local maxima sixteen samples
 /// at a time ([`peak_scan`]), and the sub-pixel and appearance work for the strongest few.
-// Kept out of line: profiles show the search apart.
+// The tracker searches with `batch::ContourSearch`, which computes exactly this; this one
+// line at a time is the reference its tests compare against.
 #[allow(clippy::too_many_arguments)]
-#[inline(never)]
+#[cfg(test)]
 pub(crate) fn search_side(
     image: &ImageView<'_>,
     side: &SideGeometry,
