@@ -59,11 +59,8 @@ fn main() {
     if let Some(v) = env("TRACKER_COARSE_STRIDE") {
         config.coarse_stride = v as usize;
     }
-    if let Some(v) = env("TRACKER_FAST_FIRST_PX") {
-        config.fast_first_px = v;
-    }
-    if let Some(v) = env("TRACKER_FAST_FIRST_ITERATIONS") {
-        config.fast_first_iterations = v as usize;
+    if let Some(v) = env("TRACKER_SHORT_FIRST_PX") {
+        config.short_first_px = v;
     }
     if let Some(v) = env("TRACKER_POINTS") {
         config.points = v as usize;

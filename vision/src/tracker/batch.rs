@@ -622,7 +622,7 @@ fn has_avx2() -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::super::search::{search_side, SideScratch};
+    use super::super::search::reference::{search_side, SideScratch};
     use super::*;
     use crate::image::ImageView;
 
@@ -684,7 +684,7 @@ mod tests {
             let mut side_of: Vec<u16> = (0..n).map(|_| rng.below(sides.len()) as u16).collect();
             side_of.sort_unstable();
             // Most points well inside, some anywhere near the image.
-            let mut place = |size: usize, rng: &mut Rng| {
+            let place = |size: usize, rng: &mut Rng| {
                 if rng.below(6) == 0 { rng.unit() * (size as f64 + 20.0) - 10.0 } else { size as f64 * (0.25 + 0.5 * rng.unit()) }
             };
             let xs: Vec<f64> = (0..n).map(|_| place(width, &mut rng)).collect();

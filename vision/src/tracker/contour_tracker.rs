@@ -223,69 +223,36 @@ impl ContourTracker {
         let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
         let predicted = self.filter.predict(&self.placement, dt_s);
         let mut current = predicted;
-        let passes = self.config.passes;
-        // Experiment: a short search around the prediction first; accepted when it barely
-        // moves the contour.
-        let mut skip_all = false;
-        if self.config.fast_first_px > 0.0 && self.updates > 0 {
-            let search_px = self.config.refine_search_px;
-            let searched = self.search(image, &current, search_px, 1);
-            let settings = FitSettings {
-                model: self.config.model,
-                loss: self.config.loss,
-                iterations: self.config.fast_first_iterations,
-                sigma_min_px: self.config.sigma_min_px,
-                sigma_max_px: self.config.sigma_max_px.min(search_px),
-                deformation_ridge: self.config.deformation_ridge,
-                perspective_ridge: self.config.perspective_ridge,
-            };
-            let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
-            let fit = fit_motion(&points, &settings, &mut self.fit);
-            if let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) {
-                let moved_px = self
-                    .template
-                    .corners()
-                    .iter()
-                    .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
-                    .fold(0.0, f64::max);
-                if moved_px < self.config.fast_first_px {
-                    current = moved;
-                    skip_all = true;
+        // Optionally a short search around the prediction first, kept when it barely moves
+        // the contour (see `TrackerConfig::short_first_px`).
+        let mut settled = false;
+        if self.config.short_first_px > 0.0 && self.updates > 0 {
+            let (search_px, iterations) = (self.config.refine_search_px, self.config.refine_iterations);
+            if let Some((moved, moved_px)) = self.pass(image, &current, search_px, 1, iterations) {
+                if moved_px < self.config.short_first_px {
+                    (current, settled) = (moved, true);
                 }
             }
         }
-        for pass in 0..if skip_all { 0 } else { passes } {
-            let search_px = if pass == 0 { self.config.search_px } else { self.config.refine_search_px };
+        let passes = if settled { 0 } else { self.config.passes };
+        for pass in 0..passes {
+            let (search_px, iterations) = if pass == 0 {
+                (self.config.search_px, self.config.iterations)
+            } else {
+                (self.config.refine_search_px, self.config.refine_iterations)
+            };
             // The first of several passes only has to find where the contour went within the
             // wide range: with `coarse_stride` > 1 a subset of the points does that (the last
             // pass always searches them all).
             let stride = if pass == 0 && passes > 1 { self.config.coarse_stride } else { 1 };
-            let searched = self.search(image, &current, search_px, stride);
-            let settings = FitSettings {
-                model: self.config.model,
-                loss: self.config.loss,
-                iterations: if pass == 0 { self.config.iterations } else { self.config.refine_iterations },
-                sigma_min_px: self.config.sigma_min_px,
-                sigma_max_px: self.config.sigma_max_px.min(search_px),
-                deformation_ridge: self.config.deformation_ridge,
-                perspective_ridge: self.config.perspective_ridge,
-            };
-            let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
-            let fit = fit_motion(&points, &settings, &mut self.fit);
-            let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
+            let Some((moved, moved_px)) = self.pass(image, &current, search_px, stride, iterations) else {
                 self.state = TrackState::Lost(LostReason::NotFinite);
                 self.updates += 1;
                 return self.state;
             };
+            current = moved;
             // A pass that barely moved any corner would be searched again at the same places:
             // skip the remaining passes (not after a subset: the checks need every point).
-            let moved_px = self
-                .template
-                .corners()
-                .iter()
-                .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
-                .fold(0.0, f64::max);
-            current = moved;
             if stride == 1 && moved_px < self.config.refine_skip_px {
                 break;
             }
@@ -308,6 +275,38 @@ impl ContourTracker {
         };
         self.updates += 1;
         self.state
+    }
+
+    /// One search and fit from `placement`: the moved placement and how far it moved the
+    /// farthest corner, px (`None` when the fit is not finite).
+    fn pass(
+        &mut self,
+        image: &ImageView<'_>,
+        placement: &Placement,
+        search_px: f64,
+        stride: usize,
+        iterations: usize,
+    ) -> Option<(Placement, f64)> {
+        let searched = self.search(image, placement, search_px, stride);
+        let settings = FitSettings {
+            model: self.config.model,
+            loss: self.config.loss,
+            iterations,
+            sigma_min_px: self.config.sigma_min_px,
+            sigma_max_px: self.config.sigma_max_px.min(search_px),
+            deformation_ridge: self.config.deformation_ridge,
+            perspective_ridge: self.config.perspective_ridge,
+        };
+        let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
+        let fit = fit_motion(&points, &settings, &mut self.fit);
+        let moved = placement.moved(fit.t, fit.a, fit.g, placement.frame.origin)?;
+        let moved_px = self
+            .template
+            .corners()
+            .iter()
+            .map(|c| (moved.image_from_template(*c) - placement.image_from_template(*c)).norm())
+            .fold(0.0, f64::max);
+        Some((moved, moved_px))
     }
 
     /// Places the points for `placement` and searches their normals: every point, or with

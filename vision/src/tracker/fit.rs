@@ -10,7 +10,7 @@
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
-use super::search::{Candidate, PointEdges, MAX_CANDIDATES};
+use super::search::{Candidate, MAX_CANDIDATES};
 use super::simd::F32x4;
 
 /// Which least-squares problem estimates the shape change (Appendix A).
@@ -209,26 +209,6 @@ impl FitBuffers {
         self.c[range].fill(c);
     }
 
-    /// The candidate edges of the points `first..first + edges.len()`.
-    pub fn set_side_candidates(&mut self, first: usize, edges: &[PointEdges]) {
-        let (lanes, end) = (self.lanes, first + edges.len());
-        assert!(end <= lanes && self.cand_h.len() == lanes * MAX_CANDIDATES && self.cand_pen.len() == self.cand_h.len());
-        let (cand_h, cand_pen) = (self.cand_h.as_mut_ptr(), self.cand_pen.as_mut_ptr());
-        for (i, e) in (first..end).zip(edges) {
-            let count = e.count as usize;
-            for (k, c) in e.candidates.iter().enumerate() {
-                // Branch-free: whether a slot holds a candidate varies from point to point.
-                let (h, pen) = if k < count { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
-                // SAFETY: i < end <= lanes and k < MAX_CANDIDATES, inside both arrays
-                // (asserted above).
-                unsafe {
-                    *cand_h.add(k * lanes + i) = h;
-                    *cand_pen.add(k * lanes + i) = pen;
-                }
-            }
-        }
-    }
-
     /// Where the search writes the candidates directly: offsets and penalties, slot-major.
     pub fn candidate_slots(&mut self) -> super::batch::FitSlots<'_> {
         super::batch::FitSlots { h: &mut self.cand_h, penalty: &mut self.cand_pen, stride: self.lanes }
@@ -251,7 +231,7 @@ impl FitBuffers {
     /// Fills the working copies from a pass's points (the tracker sets them as it searches
     /// instead).
     #[cfg(test)]
-    fn load(&mut self, points: &FitPoints<'_>, edges: &[PointEdges]) {
+    fn load(&mut self, points: &FitPoints<'_>, edges: &[super::search::PointEdges]) {
         self.resize(points.px.len());
         for side in points.sides {
             for i in side.first..side.first + side.count {
@@ -898,7 +878,7 @@ fn solve_full_vector(
 
 #[cfg(test)]
 mod tests {
-    use super::super::search::Candidate;
+    use super::super::search::{Candidate, PointEdges};
     use super::*;
 
     /// Points around a 100x60 rectangle centred on the origin, grouped by side.
