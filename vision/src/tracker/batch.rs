@@ -501,8 +501,8 @@ fn refine(
     for l in 0..out.len() {
         let upward = lanes.axis_sign[l] < 0; // the interior lies towards higher rows
         let axis_sign = lanes.axis_sign[l] as i32;
-        for s in 0..MAX_CANDIDATES {
-            let key = top[s][l];
+        for (s, slot) in top.iter().enumerate() {
+            let key = slot[l];
             if key == 0 {
                 break;
             }

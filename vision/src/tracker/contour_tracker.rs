@@ -228,10 +228,10 @@ impl ContourTracker {
         let mut settled = false;
         if self.config.short_first_px > 0.0 && self.updates > 0 {
             let (search_px, iterations) = (self.config.refine_search_px, self.config.refine_iterations);
-            if let Some((moved, moved_px)) = self.pass(image, &current, search_px, 1, iterations) {
-                if moved_px < self.config.short_first_px {
-                    (current, settled) = (moved, true);
-                }
+            if let Some((moved, moved_px)) = self.pass(image, &current, search_px, 1, iterations)
+                && moved_px < self.config.short_first_px
+            {
+                (current, settled) = (moved, true);
             }
         }
         let passes = if settled { 0 } else { self.config.passes };
