@@ -56,6 +56,7 @@
 //!     Failed(f) => send Stop, report f
 //! ```
 
+mod goal;
 mod jacobian;
 mod measure;
 
@@ -66,6 +67,7 @@ mod testscene;
 #[cfg(test)]
 mod tests;
 
+pub use goal::FacetGoal;
 pub use jacobian::{ModelError, ServoModel};
 pub use measure::{measure, GeometryError, Measurement, Parallax, PlaneTransfer};
 
@@ -214,6 +216,13 @@ pub struct ServoConfig {
     /// The learned correction of each Jacobian row stays below this fraction of the row's
     /// norm, so noise can never turn the model around.
     pub broyden_max_fraction: f64,
+    /// Weight of the angle row `ρ` relative to its natural one (the marks' mean distance
+    /// from the reference point, so that an angle counts as the displacement of a mark).
+    /// With a 4-DOF arm and a vertical facet, `ρ` (a rotation about the facet's normal) is
+    /// out of reach and responds to yaw only through the obliquity of the view, relative to
+    /// a goal angle that comes from the model; the marks' parallaxes measure the same yaw by
+    /// stereo. 0 leaves the yaw to the parallaxes alone.
+    pub angle_weight: f64,
 }
 
 impl Default for ServoConfig {
@@ -235,6 +244,7 @@ impl Default for ServoConfig {
             broyden: false,
             broyden_min_step_m: 0.001,
             broyden_max_fraction: 0.5,
+            angle_weight: 1.0,
         }
     }
 }
@@ -266,6 +276,7 @@ impl ServoConfig {
         check("yaw_lever_m", self.yaw_lever_m, self.yaw_lever_m > 0.0, "> 0")?;
         check("broyden_min_step_m", self.broyden_min_step_m, self.broyden_min_step_m > 0.0, "> 0")?;
         check("broyden_max_fraction", self.broyden_max_fraction, self.broyden_max_fraction >= 0.0, ">= 0")?;
+        check("angle_weight", self.angle_weight, self.angle_weight >= 0.0, ">= 0")?;
         Ok(())
     }
 }
@@ -486,11 +497,13 @@ impl CoplanarityServo {
         // Rows weighted to pixel-sized numbers and columns all in metres (yaw scaled by the
         // lever): every entry is pixels per metre, so the singular values compare how well
         // each direction of motion is seen, whatever the units of the rows and columns.
+        let mut weights = m.row_weights;
+        weights[5] *= self.config.angle_weight;
         let mut jw = j_scaled;
         for r in 0..6 {
-            jw.row_mut(r).scale_mut(m.row_weights[r]);
+            jw.row_mut(r).scale_mut(weights[r]);
         }
-        let ew = m.error.component_mul(&m.row_weights);
+        let ew = m.error.component_mul(&weights);
         let svd = jw.svd(true, true);
         let (smax, smin) = (svd.singular_values.max(), svd.singular_values.min());
         let condition = smin / smax;
