@@ -63,6 +63,8 @@ mod measure;
 #[cfg(test)]
 pub(crate) mod testcam;
 #[cfg(test)]
+mod testpick;
+#[cfg(test)]
 mod testscene;
 #[cfg(test)]
 mod tests;
