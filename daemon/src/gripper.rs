@@ -405,4 +405,26 @@ mod tests {
         let blank = ImageBuf::filled(320, 240, 110);
         assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
     }
+
+    /// A triangle seen from two sides has a different shape in each view, so each
+    /// tracker's own template origin (its polygon's perimeter centroid) is a different point
+    /// of the facet. In shared coordinates the plane transfer maps every left corner onto
+    /// its right corner; with per-view frames its offset `b` is pixels off.
+    #[test]
+    fn stereo_frame_puts_both_views_in_shared_coordinates() {
+        let left = [[100.0, 300.0], [160.0, 285.0], [155.0, 200.0]];
+        let right = [[90.0, 310.0], [185.0, 280.0], [140.0, 190.0]];
+        let cfg = handeye_vision::tracker::TrackerConfig::default();
+        let (l, r) = (ContourTracker::new(cfg, &left).unwrap(), ContourTracker::new(cfg, &right).unwrap());
+        let worst = |frames: &StereoFrame| {
+            let t = handeye_vision::servo::PlaneTransfer::from_frames(frames).unwrap();
+            left.iter().zip(&right).map(|(a, b)| (v2(t.apply(a)) - v2(*b)).norm()).fold(0.0, f64::max)
+        };
+        assert!(worst(&stereo_frame(&l, &r)) < 1e-6, "{}", worst(&stereo_frame(&l, &r)));
+        let per_view = StereoFrame { left: facet_frame(&l), right: facet_frame(&r) };
+        assert!(worst(&per_view) > 1.0, "per-view frames transfer the corners within {} px", worst(&per_view));
+        // A corner count that differs between views falls back to per-view frames.
+        let quad = ContourTracker::new(cfg, &[[90.0, 310.0], [185.0, 280.0], [180.0, 200.0], [95.0, 190.0]]).unwrap();
+        assert_eq!(stereo_frame(&l, &quad).right, facet_frame(&quad));
+    }
 }

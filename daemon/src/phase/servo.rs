@@ -467,3 +467,32 @@ impl ServoPhase {
         Cmd::move_by([d.x, d.y, d.z], motion.yaw_rad, m.cfg.servo.speed_mps)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::servo::AffineFrame;
+
+    fn frame(dx: f64) -> StereoFrame {
+        let f = |o: [f64; 2]| AffineFrame { o: [o[0] + dx, o[1]], e1: [30.0, 2.0], e2: [-3.0, 40.0] };
+        StereoFrame { left: f([300.0, 400.0]), right: f([280.0, 410.0]) }
+    }
+
+    #[test]
+    fn target_mean_averages_jitter_and_restarts_after_a_jump() {
+        let mut mean = TargetMean::default();
+        assert!(mean.mean().is_none());
+        for dx in [0.4, -0.4, 0.2, -0.2] {
+            mean.add(&frame(dx));
+        }
+        let m = mean.mean().unwrap();
+        assert!((m.left.o[0] - 300.0).abs() < 1e-12 && (m.right.e2[1] - 40.0).abs() < 1e-12, "{m:?}");
+        // Not-finite frames are skipped.
+        mean.add(&frame(f64::NAN));
+        assert_eq!(mean.n, 4);
+        // The target moved 5 px: the old frames no longer describe it.
+        mean.add(&frame(5.0));
+        assert_eq!(mean.n, 1);
+        assert!((mean.mean().unwrap().left.o[0] - 305.0).abs() < 1e-12);
+    }
+}
