@@ -427,8 +427,9 @@ fn wedge_triangle_far_below_the_plate_aligns_within_1_mm_and_1_degree() {
         let pick = Pick { noise_px: 0.3, frames_per_step: 6, ..Pick::new(face) };
         let (plane, yaw, height) = worst(&pick, 8);
         assert!(plane < 1.0 && yaw < 1.0 && height < 2.0, "wedge at {yaw_deg}°: plane {plane:.2} mm, yaw {yaw:.2}°, height {height:.2} mm");
-        let (plane_once, _, _) = worst(&Pick { goal_every_step: false, ..pick }, 8);
-        assert!(plane_once > 2.0 * plane.max(0.5), "wedge at {yaw_deg}°: a goal imaged once should carry its look's error ({plane_once:.2} mm vs {plane:.2} mm)");
+        let once: Vec<_> = (1..=8).map(|seed| run_pick(&Pick { seed, goal_every_step: false, ..pick.clone() })).collect();
+        let bad = once.iter().filter(|o| o.outcome != StepOutcome::Converged || o.plane_mm.abs() > 1.0 || o.yaw_deg.abs() > 1.0).count();
+        assert!(bad >= 4, "wedge at {yaw_deg}°: a goal imaged once should fail to converge or carry its look's error: {once:?}");
     }
 }
 
@@ -465,4 +466,43 @@ fn the_goal_height_comes_from_the_robot_not_the_model() {
     assert!(kinematic.height_mm.abs() < 1.0, "{kinematic:?}");
     assert!(imaged.height_mm < -5.0, "the image-only height was expected well off here: {imaged:?}");
     assert!(kinematic.plane_mm.abs() < 0.5 && kinematic.yaw_deg.abs() < 0.5, "{kinematic:?}");
+}
+
+/// The convergence test averages the last steps' estimates; when they scatter (here the
+/// parallax jitters by ±1.2 mm's worth from step to step, as a target transfer extrapolated
+/// far from a small facet once did) their mean is small and meaningless, and the servo must
+/// go on rather than declare convergence on it. Jitter within the tolerance still converges.
+#[test]
+fn scattered_estimates_do_not_converge_on_their_mean() {
+    let rig = Rig::standard(1500.0);
+    let facet = Facet::standard();
+    let mut rng = Rng::new(1);
+    let start = Pose::goal(&facet);
+    let model = ServoModel::new(&calibrate(&rig, start.yaw_rad, &mut rng, 0.0)).unwrap();
+    let target = observe_target(&rig, &facet, &mut rng, 0.0);
+    let taught = ServoGoal::teach(&model, &target, &observe_gripper(&rig, &start, &mut rng, 0.0)).unwrap();
+    let px_per_mm = model.parallax_for_offset(&target, &(0.001 * facet.normal)).unwrap().abs();
+    let run = |jitter_mm: f64, converged_spread: f64| {
+        let mut rng = Rng::new(2);
+        let config = ServoConfig { converged_spread, max_steps: 30, ..ServoConfig::default() };
+        let mut servo = CoplanarityServo::new(model, config).unwrap();
+        let mut pose = start;
+        loop {
+            let sign = if servo.steps() % 2 == 0 { 1.0 } else { -1.0 };
+            let goal = ServoGoal { parallax_px: taught.parallax_px.map(|p| p + sign * jitter_mm * px_per_mm), ..taught };
+            let s = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
+            match s.outcome {
+                StepOutcome::Move => pose.apply(&s.motion),
+                other => return (other, s.step),
+            }
+        }
+    };
+    // Without the agreement test the mean of four alternating estimates is the true offset,
+    // which the loop keeps at a third of the jitter: "converged".
+    assert_eq!(run(1.2, 1e9).0, StepOutcome::Converged);
+    let (outcome, steps) = run(1.2, 2.0);
+    assert!(matches!(outcome, StepOutcome::Failed(ServoFailure::StepLimit { .. })), "{outcome:?} after {steps} steps");
+    let (outcome, steps) = run(0.2, 2.0);
+    assert_eq!(outcome, StepOutcome::Converged, "after {steps} steps");
+    assert!(steps <= 8, "{steps} steps");
 }
