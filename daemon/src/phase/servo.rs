@@ -309,10 +309,21 @@ impl ServoPhase {
     /// `shift_px` is how far the moved camera's image went: its affine model's offset moves
     /// with it (the first-order effect of a small knock). The goal, held in the facet's
     /// frame, needs nothing: it is turned into image terms from the re-acquired target.
+    ///
+    /// A knock before the local model was fitted (during the approach or the local cage)
+    /// voids the cage's samples so far: the cage starts again from the approach pose and
+    /// fits the local model to the moved camera as it is now.
     pub fn resume(&mut self, m: &mut Mission, view: View, shift_px: [f64; 2]) {
         self.wait = None;
-        self.stage = Stage::Servo { converging: false };
         self.target_recent = TargetMean::default();
+        self.stage = if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
+            self.local_robot_m.clear();
+            self.local_image_px.clear();
+            self.target_cage = TargetMean::default();
+            Stage::Approach
+        } else {
+            Stage::Servo { converging: false }
+        };
         let rows = if view == View::Left { [0, 1] } else { [2, 3] };
         if let Some(cal) = m.calibration.as_mut() {
             cal.model.c[rows[0]] += shift_px[0];
