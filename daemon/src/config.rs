@@ -239,9 +239,11 @@ pub struct ServoSettings {
     pub speed_mps: f64,
     /// Height of the tool point above the table (`grasp.table_z_m`) at the grasp, m.
     pub grasp_height_m: f64,
-    /// Half-size of the local cage visited around the coarse approach pose, m: a local
-    /// affine model there takes out the perspective error of the global one (the global
-    /// model's image scale is that of the cage, ~10 % off near the target). 0 = skip.
+    /// Size of the local cage visited around the coarse approach pose, m: 7 points, the
+    /// pose, ±this along x and y, and this and twice this above (never below: the jaws hang
+    /// over the block there). A local affine model there takes out the perspective error of
+    /// the global one (the global model's image scale is that of the cage, ~10 % off near
+    /// the target). 0 = skip.
     pub local_cage_m: f64,
     /// The servo's goal is this far above the grasp pose (the open-loop approach comes down
     /// by it), m.

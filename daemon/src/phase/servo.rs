@@ -10,16 +10,23 @@
 //! can shift. Within the plane, the reference point goes straight above the facet's centre,
 //! high enough that the tool point is `grasp_height_m + standoff_above_m` above the table:
 //! the jaws, `tool_from_reference` behind the plate, then hang behind the facet plane and
-//! above the block. That in-plane offset becomes `(s*, t*)` by [`ServoGoal::offset_by`]; the
-//! goal angle is that of the plate's horizontal axis within the facet. The grasp then moves
-//! by metric offsets the robot's kinematics make exact: along the plate normal until the
-//! jaw centre is `depth/2` behind the facet, and down to the grasp height.
+//! above the block. The goal is held in the facet's frame in metres ([`FacetGoal`]: the
+//! reference point and the marks relative to the facet origin, the plate axis along the
+//! facet) and turned into image terms at every step, with the target frames averaged since
+//! the last step, so that the facet's transfer errors (extrapolated ~140 px from a facet
+//! 30-60 px across) are the same in measurement and goal and cancel. Its height comes from
+//! the robot's kinematics ([`FacetGoal::image_goal_at_height`]). The facet's normal is the
+//! direction of the model's parallax gradient through the facet's transfer, so the marks'
+//! goal parallaxes differ only by what the images say. The grasp then moves by metric
+//! offsets the robot's kinematics make exact: along the plate normal (as the servo left it)
+//! until the jaw centre is `depth/2` behind the facet, and down to the grasp height.
 //!
 //! **Coarse approach, local cage.** The servo starts from the goal pose as the global model
-//! reconstructs it (a `MoveTo`), then visits a small cage around it (±`local_cage_m`) and
-//! fits a local affine model: the global model's image scale is the cage's, while near the
-//! target it differs by ~10 % (perspective), and the metric stand-off offsets are converted
-//! with it. The servo and its goal use the local model.
+//! reconstructs it (a `MoveTo`), then visits a small cage around it (`local_cage_m`
+//! sideways and up, never down: the jaws hang over the block) and fits a local affine model:
+//! the global model's image scale is the cage's, while near the target it differs by ~10 %
+//! (perspective). The servo's Jacobian, the facet's normal and the image goal use the local
+//! model. A camera knocked before the local fit restarts the cage.
 //!
 //! **Yaw centre.** The servo turns about the plate's reference point; the robot turns about
 //! the tool point. Each move is converted: `Δtool = Δref + (Rz(Δψ) − I)(tool − ref)`, with
@@ -169,7 +176,7 @@ fn views(m: &Mission) -> Result<(StereoFrame, GripperView), String> {
 fn facet_normal(model: &ServoModel, toward_cameras: &Vector3<f64>, target: &StereoFrame) -> Result<Vector3<f64>, String> {
     let transfer = PlaneTransfer::from_frames(target).map_err(|e| format!("servo: target: {e}"))?;
     let mut n: Vector3<f64> = model.parallax_gradient(&transfer).transpose();
-    if !(n.norm() > 1e-9) {
+    if n.norm().is_nan() || n.norm() <= 1e-9 {
         return Err("servo: the target facet has no parallax gradient (seen edge-on?)".into());
     }
     n /= n.norm();

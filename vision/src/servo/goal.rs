@@ -113,7 +113,8 @@ impl FacetGoal {
         let s_z = v2(&model.st_for_offset(target, &Vector3::z())?);
         let basis = nalgebra::Matrix2::from_columns(&[s_a, s_z]);
         // |det| / (|s_a| |s_z|) is the sine of the angle between the two directions in (s, t).
-        if !(basis.determinant().abs() > 0.05 * s_a.norm() * s_z.norm()) {
+        let det = basis.determinant().abs();
+        if det.is_nan() || det <= 0.05 * s_a.norm() * s_z.norm() {
             return Err(GeometryError::DegenerateGoal);
         }
         let Some(inv) = basis.try_inverse() else { return Err(GeometryError::DegenerateGoal) };

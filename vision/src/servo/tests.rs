@@ -488,7 +488,7 @@ fn scattered_estimates_do_not_converge_on_their_mean() {
         let mut servo = CoplanarityServo::new(model, config).unwrap();
         let mut pose = start;
         loop {
-            let sign = if servo.steps() % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = if servo.steps().is_multiple_of(2) { 1.0 } else { -1.0 };
             let goal = ServoGoal { parallax_px: taught.parallax_px.map(|p| p + sign * jitter_mm * px_per_mm), ..taught };
             let s = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
             match s.outcome {
