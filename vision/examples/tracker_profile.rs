@@ -18,16 +18,11 @@ use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
 use nalgebra::Vector2;
 
-const TOP: [[f64; 2]; 4] = [[315.0, 234.0], [385.0, 205.0], [443.0, 251.0], [365.0, 291.0]];
+#[path = "../tests/visp_cube_truth/mod.rs"]
+mod visp_cube_truth;
+use visp_cube_truth::{GROUND_TRUTH as TRUTH, TOP_FACE_FRAME0 as TOP};
+
 const LEFT: [[f64; 2]; 4] = [[315.0, 234.0], [365.0, 291.0], [361.0, 350.0], [317.0, 289.0]];
-const TRUTH: [(usize, [[f64; 2]; 4]); 6] = [
-    (0, [[314.8, 234.0], [384.0, 204.8], [443.0, 253.0], [366.5, 291.0]]),
-    (50, [[322.4, 216.0], [374.4, 178.4], [443.0, 212.4], [390.0, 257.5]]),
-    (100, [[296.3, 155.8], [345.3, 128.0], [402.5, 155.0], [351.7, 190.8]]),
-    (150, [[293.6, 135.7], [313.6, 101.4], [380.0, 110.7], [362.0, 150.0]]),
-    (200, [[296.5, 139.0], [275.0, 104.0], [336.0, 92.5], [361.9, 121.4]]),
-    (217, [[297.0, 139.0], [265.3, 106.1], [323.0, 91.0], [357.0, 117.5]]),
-];
 
 fn load(dir: &Path, k: usize) -> ImageBuf {
     let path = dir.join(format!("image{k:04}.png"));
