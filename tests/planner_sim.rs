@@ -231,6 +231,25 @@ fn diag_trace() {
                 }
                 eprintln!("    edge {k} len {:.0}/{:.0} px, corner epi res {res:.2}: left segs {ls:?} right segs {rs:?} {}", geom::dist(a, b), geom::dist(a2, b2), info.join("; "));
             }
+            // The face's true transfer (least squares through its projected corners) and the
+            // line residuals under it of the segments on its edges.
+            let mut fit = handeye_vision::planner::transfer::TransferFit::new(face.polygon[0][0]);
+            for k in 0..n {
+                fit.add_point(face.polygon[0][k], face.polygon[1][k], 1.0);
+            }
+            if let Some(t) = fit.solve() {
+                let worst = (0..n).map(|k| geom::dist(t.apply(face.polygon[0][k]), face.polygon[1][k])).fold(0.0, f64::max);
+                let mut res = Vec::new();
+                for c in &plan.candidates.list {
+                    let (l, r) = (&plan.left_segments[c.left as usize], &plan.right_segments[c.right as usize]);
+                    let on = |s: &handeye_vision::planner::segments::Segment, p: &[[f64; 2]]| (0..p.len()).any(|k| geom::point_segment_distance(s.p0, p[k], p[(k + 1) % p.len()]) < 1.5 && geom::point_segment_distance(s.p1, p[k], p[(k + 1) % p.len()]) < 1.5);
+                    if on(l, &face.polygon[0]) && on(r, &face.polygon[1]) {
+                        let (rr, _) = handeye_vision::planner::transfer::line_residuals(&t, l, r);
+                        res.push(format!("L{}R{} {:.2}/{:.2}", c.left, c.right, rr[0], rr[1]));
+                    }
+                }
+                eprintln!("    true transfer: corner misfit {worst:.2} px; edge matches {}", res.join(", "));
+            }
         }
     }
 }
