@@ -22,7 +22,8 @@ pub struct RelationConfig {
     pub junction_gap_px: f64,
     /// The reach is at most this fraction of the shorter segment's length ...
     pub junction_gap_rel: f64,
-    /// ... but never below this, pixels.
+    /// ... but never below this, pixels (three edges meeting at a block's corner round it
+    /// off over ~6 px, also on short edges).
     pub junction_gap_min_px: f64,
     /// Width of the gradient of a strong edge that swamps a weak one meeting it (see
     /// `end_reach`), pixels; 0 disables the allowance.
@@ -46,7 +47,7 @@ impl Default for RelationConfig {
         Self {
             junction_gap_px: 8.0,
             junction_gap_rel: 0.2,
-            junction_gap_min_px: 4.0,
+            junction_gap_min_px: 6.0,
             junction_swamp_sigma_px: 1.5,
             junction_min_angle_deg: 8.0,
             parallel_max_angle_deg: 3.0,
