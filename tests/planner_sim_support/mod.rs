@@ -214,9 +214,6 @@ pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout]) 
     doc.insert("description".into(), toml::Value::String(format!("random layout, seed {seed}")));
     doc.insert("seed".into(), toml::Value::Integer(seed as i64));
     doc.remove("events");
-    if std::env::var("AA").is_ok() {
-        doc.get_mut("render").and_then(|r| r.as_table_mut()).expect("[render]").insert("antialias".into(), toml::Value::Boolean(true));
-    }
     let arr: Vec<toml::Value> = blocks
         .iter()
         .enumerate()
