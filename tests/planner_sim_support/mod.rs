@@ -459,6 +459,28 @@ impl FaceIds {
         if uni == 0 { 0.0 } else { inter as f64 / uni as f64 }
     }
 
+    /// Both views' face ids, keeping in each only the pixels whose point the other camera
+    /// sees too: what a stereo planner can match. (A face partly hidden in one view, by
+    /// another block or by its own block's other part, shows more in the other view than can
+    /// be matched there.)
+    pub fn seen_by_both(snap: &Snapshot, ids: &[FaceIds; 2]) -> [FaceIds; 2] {
+        [0, 1].map(|v| {
+            let (cam, other) = (&snap.cameras[v], &snap.cameras[1 - v]);
+            let mut out = ids[v].ids.clone();
+            for (i, id) in out.iter_mut().enumerate() {
+                let Some(fi) = id.checked_sub(1).map(|f| f as usize) else { continue };
+                let f = &snap.faces[fi];
+                let p = [(i % ids[v].width) as f64 + 0.5, (i / ids[v].width) as f64 + 0.5];
+                let (n, c0, d) = (Vector3::from(f.normal), Vector3::from(f.corners_m[0]), cam.ray(p));
+                let x = cam.position_m + d * (n.dot(&(c0 - cam.position_m)) / n.dot(&d));
+                if ids[1 - v].at(other.project(x.into())) != Some(fi) {
+                    *id = 0;
+                }
+            }
+            FaceIds { width: ids[v].width, height: ids[v].height, ids: out }
+        })
+    }
+
     /// The face seen at pixel point `p`, if any.
     pub fn at(&self, p: P2) -> Option<usize> {
         if p[0] < 0.0 || p[1] < 0.0 {
@@ -537,9 +559,10 @@ impl SceneScore {
 /// Scores a plan against the snapshot's truth:
 /// - a face is *considered* when the simulator counts more than 400 visible pixels of it in
 ///   both views (`visible_px`);
-/// - it is *found* when a facet's polygon has IoU >= 0.7 with the face's visible region
-///   (the pixels where it is what the camera sees, from our z-buffer of the faces) in each
-///   view: a face partly hidden by another block is judged on what can be seen of it;
+/// - it is *found* when a facet's polygon has IoU >= 0.7 with the face's visible region in
+///   each view: the pixels where it is what the camera sees (from our z-buffer of the
+///   faces) and the other camera sees that point of it too ([`FaceIds::seen_by_both`]), so a
+///   face partly hidden in one view or both is judged on what stereo can match of it;
 /// - a facet is a block facet when its left IoU with some visible face is >= 0.3, a plate
 ///   facet when that holds for the gripper plate's polygon, an arm facet when its
 ///   reconstructed centroid is off the work surface ([`on_work_surface`]); else spurious;
@@ -560,6 +583,7 @@ pub fn score(snap: &Snapshot, plan: &Plan) -> SceneScore {
             }
         }
     }
+    let both = FaceIds::seen_by_both(snap, &ids);
     let mut faces = Vec::new();
     let mut corner_errors_m = Vec::new();
     let mut corner_errors_affine_m = Vec::new();
@@ -570,7 +594,7 @@ pub fn score(snap: &Snapshot, plan: &Plan) -> SceneScore {
         }
         let mut best = FaceScore { face: fi, facet: None, iou: [0.0; 2], found: false };
         for (k, r) in plan.facets.iter().enumerate() {
-            let iou = [ids[0].iou(&r.facet.left, fi), ids[1].iou(&r.facet.right, fi)];
+            let iou = [both[0].iou(&r.facet.left, fi), both[1].iou(&r.facet.right, fi)];
             if (iou[0].min(iou[1]), iou[0] + iou[1]) > (best.iou[0].min(best.iou[1]), best.iou[0] + best.iou[1]) {
                 best = FaceScore { face: fi, facet: Some(k), iou, found: iou[0] >= MIN_IOU && iou[1] >= MIN_IOU };
             }
