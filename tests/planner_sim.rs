@@ -1,6 +1,7 @@
 //! The planner on the simulator's snapshots (issue #6 acceptance): the shipped scenarios and
-//! ten seeded random layouts of 2-5 blocks (clutter3's cameras, cage, light and arm; blocks
-//! placed where both cameras see them whole), rendered by `handeye snapshot` with
+//! 25 seeded random layouts of 2-5 blocks (clutter3's cameras, cage, light and arm, rendered
+//! antialiased as the pick scenarios are; blocks placed where both cameras see them whole),
+//! rendered by `handeye snapshot` with
 //! perspective cameras (~1.6 m, f = 1800 px), calibrated from the snapshot's cage as
 //! `handeye plan --points cage.json` does (the affine model for matching, pinhole cameras
 //! fitted to the same eight points for robot coordinates), scored against `truth.json`.
@@ -29,10 +30,16 @@ fn scenarios_dir() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios"))
 }
 
-/// Snapshots of every shipped scenario and of `random` seeded layouts.
+/// Snapshots of every shipped scenario and of `random` seeded layouts (antialiased unless
+/// `ALIASED` is set: a diagnostic switch, not used by the acceptance test).
 fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
+    snapshots_with(dir, random, std::env::var("ALIASED").is_err())
+}
+
+fn snapshots_with(dir: &Path, random: u64, antialias: bool) -> Vec<Snapshot> {
     let mut shipped: Vec<_> = std::fs::read_dir(scenarios_dir()).expect("scenarios/").filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "toml")).collect();
     shipped.sort();
+    let base_name = "clutter3";
     let base = std::fs::read_to_string(scenarios_dir().join("clutter3.toml")).expect("clutter3.toml");
     let light = Lighting::of_scenario(&base);
     let mut out = Vec::new();
@@ -43,13 +50,15 @@ fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
         out.push(Snapshot::load(&name, &d));
     }
     // The random layouts share clutter3's cameras: blocks go where both see them whole.
-    let cams = out.iter().find(|s: &&Snapshot| s.name == "clutter3").expect("clutter3 snapshot").cameras.clone();
+    // Their edges are antialiased, as the pick scenarios' are (a camera gives a pixel an edge
+    // crosses the mixed grey); clutter3 predates that option.
+    let cams = out.iter().find(|s: &&Snapshot| s.name == base_name).expect("base snapshot").cameras.clone();
     let (w, h) = (out[0].left.width as f64, out[0].left.height as f64);
     let visible = |b: &BlockLayout| in_view(b, &cams, w, h, 5.0);
     for seed in 1..=random {
         let count = 2 + (seed as usize % 4);
         let name = format!("random{seed:02}");
-        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light, &visible));
+        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light, &visible), antialias);
         let file = dir.join(format!("{name}.toml"));
         std::fs::write(&file, toml).expect("write scenario");
         let d = dir.join(&name);
@@ -59,10 +68,15 @@ fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
     out
 }
 
+/// Random layouts in the acceptance test.
+const RANDOM_LAYOUTS: u64 = 25;
+
 #[test]
 fn snapshots_meet_the_acceptance_measure() {
     let scratch = Scratch::new("planner-sim");
-    let snaps = snapshots(&scratch.0, 10);
+    // 25 layouts (~200 faces with the shipped scenes) rather than the issue's minimum of 10:
+    // the found rate of ~90 faces moves by a few percent with the seeds.
+    let snaps = snapshots_with(&scratch.0, RANDOM_LAYOUTS, true);
     let mut planner = Planner::new(PlannerConfig::default());
     let (mut considered, mut found, mut spurious) = (0, 0, 0);
     let (mut corners, mut corners_affine) = (Vec::new(), Vec::new());
@@ -242,7 +256,7 @@ fn diag_trace() {
     use handeye_vision::planner::geom;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
     std::fs::create_dir_all(&dir).unwrap();
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let only = std::env::var("SCENE").ok();
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     let mut cfg = PlannerConfig::default();
@@ -311,7 +325,7 @@ fn diag_trace() {
 fn diag_epipolar() {
     use handeye_vision::affine::EpipolarConstraint;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     for snap in &snaps {
         let geo = snap.geometry(0.5, 10.0);
         let mut w = Vec::new();
@@ -366,7 +380,7 @@ fn diag_face() {
             let s = &segs[i];
             let js: Vec<String> = rel.junctions_of(i as u32).iter().map(|&j| { let j = &rel.junctions[j as usize]; format!("{}{:?}@({:.0},{:.0})", j.other(i as u32).0, j.kind, j.point[0], j.point[1]) }).collect();
             let eta = if v == 0 { (ef.eta_left(s.p0), ef.eta_left(s.p1)) } else { (ef.eta_right(s.p0), ef.eta_right(s.p1)) };
-            eprintln!("  seg {i}: ({:.1},{:.1})-({:.1},{:.1}) len {:.0} contrast {:.1} eta {:.1}..{:.1} junctions {js:?}", s.p0[0], s.p0[1], s.p1[0], s.p1[1], s.length(), s.contrast, eta.0, eta.1);
+            eprintln!("  seg {i}: ({:.1},{:.1})-({:.1},{:.1}) len {:.0} rms {:.2} contrast {:.1} eta {:.1}..{:.1} junctions {js:?}", s.p0[0], s.p0[1], s.p1[0], s.p1[1], s.length(), s.rms_px, s.contrast, eta.0, eta.1);
             if v == 0 {
                 for c in plan.candidates.of_left(i as u32) {
                     let cd = &plan.candidates.list[c];
@@ -407,7 +421,7 @@ fn diag_edges_at() {
 #[ignore]
 fn diag_final_epipolar() {
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let mut planner = Planner::new(PlannerConfig::default());
     for snap in &snaps {
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));
@@ -434,7 +448,7 @@ fn diag_final_epipolar() {
 fn diag_contrast() {
     use handeye_vision::planner::geom;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let mut planner = Planner::new(PlannerConfig::default());
     for snap in &snaps {
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));

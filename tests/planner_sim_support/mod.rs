@@ -207,13 +207,17 @@ pub fn random_layout(seed: u64, count: usize, light: &Lighting, visible: &dyn Fn
 }
 
 /// A scenario file: `base` (a shipped scenario: its cameras, table, light, cage, arm) with
-/// its blocks, task and events replaced by `blocks`.
-pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout]) -> String {
+/// its blocks, task and events replaced by `blocks`, and the given `[render] antialias`.
+pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout], antialias: bool) -> String {
     let mut doc: toml::Table = base.parse().expect("shipped scenario is valid TOML");
     doc.insert("name".into(), toml::Value::String(name.into()));
     doc.insert("description".into(), toml::Value::String(format!("random layout, seed {seed}")));
     doc.insert("seed".into(), toml::Value::Integer(seed as i64));
     doc.remove("events");
+    // Rendered as a camera sees edges (a pixel an edge crosses takes the mixed grey), as the
+    // pick scenarios are; clutter3 predates the option.
+    let render = doc.get_mut("render").and_then(|r| r.as_table_mut()).expect("[render]");
+    render.insert("antialias".into(), toml::Value::Boolean(antialias));
     let arr: Vec<toml::Value> = blocks
         .iter()
         .enumerate()
