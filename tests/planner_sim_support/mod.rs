@@ -330,17 +330,8 @@ impl Snapshot {
         let cameras = [0, 1].map(|k| {
             let c = &truth["cameras"][k];
             let rows: Vec<Vec<f64>> = c["pixel_from_robot"].as_array().expect("matrix").iter().map(f64s).collect();
-            let mut m = [[0.0; 4]; 3];
-            for r in 0..3 {
-                for col in 0..4 {
-                    m[r][col] = rows[r][col];
-                }
-            }
             // Shift to planner pixels: u + 0.5 = (row0 + 0.5 row2)·X / row2·X.
-            for col in 0..4 {
-                m[0][col] += SIM_TO_PLANNER_PX * m[2][col];
-                m[1][col] += SIM_TO_PLANNER_PX * m[2][col];
-            }
+            let m: [[f64; 4]; 3] = [0, 1, 2].map(|r| [0, 1, 2, 3].map(|col| rows[r][col] + if r < 2 { SIM_TO_PLANNER_PX * rows[2][col] } else { 0.0 }));
             let p = f64s(&c["position_m"]);
             Camera { position_m: Vector3::new(p[0], p[1], p[2]), pixel_from_robot: m }
         });
