@@ -182,9 +182,10 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     config.calibration.cage_m = scenario.cage.points_m.clone();
     config.frame_rate_hz = f64::from(scenario.render.frame_rate_hz);
     // Lockstep: the simulator renders frame N+1 only after the daemon answered frame N, so a
-    // slow render on a loaded machine is not a stale camera. A simulator that is gone is still
+    // slow render on a loaded machine is not a stale camera (2 s was exceeded once on the
+    // 2-core machine with other builds running). A simulator that is gone is still
     // noticed within ~100 ms by the stream's liveness check.
-    config.stale_frame_ms = config.stale_frame_ms.max(2000);
+    config.stale_frame_ms = config.stale_frame_ms.max(5000);
     config.validate(&dir.join("daemon.toml"))?;
     std::fs::write(dir.join("daemon.toml"), config.to_toml())?;
     let domain = args.domain.clone().unwrap_or_else(|| Domain::unique("run"));
