@@ -133,3 +133,31 @@ fn l_shaped_top_face_keeps_its_concavity() {
     assert!(geom::area(&best.facet.left) < 1.08 * geom::area(&l_left), "facet area {:.0} vs L {:.0}", geom::area(&best.facet.left), geom::area(&l_left));
     assert!(best.facet.left.len() >= 6, "an L has six corners: {:?}", best.facet.left);
 }
+
+#[test]
+#[ignore]
+fn diag_synth() {
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    let mut cfg = PlannerConfig::default();
+    if let Some(v) = env("FLIP") { cfg.matching.allow_flipped = v > 0.0; }
+    if let Some(v) = env("SPREAD") { cfg.planes.min_anchor_spread_px = v; }
+    if let Some(v) = env("WIDEN") { cfg.bootstrap_widen = v; }
+    if let Some(v) = env("JMIN") { cfg.relations.junction_gap_min_px = v; }
+    if let Some(v) = env("JREL") { cfg.relations.junction_gap_rel = v; }
+    if let Some(v) = env("JGAP") { cfg.relations.junction_gap_px = v; }
+    if let Some(v) = env("MINSEG") { cfg.facets.min_segments = v as usize; }
+    if let Some(v) = env("TOUCH") { cfg.facets.touch_px = v; }
+    let (mut considered, mut found, mut spurious) = (0, 0, 0);
+    let mut planner = Planner::new(cfg);
+    for seed in 1..=env("N").unwrap_or(10.0) as u64 {
+        let scene = SynthScene::random(2 + (seed as usize % 4), seed);
+        let pair = scene.render(seed);
+        let plan = planner.plan(&pair.left.view(), &pair.right.view(), &geometry(&pair));
+        let s = score(&plan, &pair);
+        if env("QUIET").is_none() { eprintln!("seed {seed}: {}/{} spurious {} {:?}", s.found, s.considered, s.spurious, s.faces.iter().filter(|f| !f.found).map(|f| (f.face, f.iou_left, f.iou_right)).collect::<Vec<_>>()); }
+        considered += s.considered;
+        found += s.found;
+        spurious += s.spurious;
+    }
+    eprintln!("TOTAL {found}/{considered} spurious {spurious}");
+}

@@ -155,3 +155,68 @@ fn frames_0_and_20_have_no_parallax_so_no_stereo_geometry() {
     assert!(4 * within >= 3 * offsets.len(), "only {within} of {} edges within 0.5 px: {offsets:?}", offsets.len());
     assert!(offsets[offsets.len() / 2] < 0.2, "median offset {:.2} px", offsets[offsets.len() / 2]);
 }
+
+/// Diagnostic: the facets of the 0/40 pair, their area on each annotated face, and an
+/// overlay of their left polygons (VISP_OVERLAY=path.png).
+#[test]
+#[ignore]
+fn diag_frames_0_and_40() {
+    let Some(dir) = data_dir() else { return };
+    let f0 = faces(&json(&dir.join("faces-frame0.json")));
+    let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
+    let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
+    let (left, right) = (load(&dir.join("image0000.png")), load(&dir.join("image0040.png")));
+    let plan = Planner::new(PlannerConfig::default()).plan(&left.view(), &right.view(), &geo);
+    eprintln!("bootstrap {:?}", plan.bootstrap);
+    for (k, f) in f0.iter().enumerate() {
+        eprintln!("face {} area {:.0}", FACES[k], geom::area(f));
+    }
+    for (k, p) in plan.planes.iter().enumerate() {
+        let lefts: Vec<&handeye_vision::planner::segments::Segment> = p.members.iter().map(|&m| &plan.left_segments[plan.candidates.list[m as usize].left as usize]).collect();
+        let (x0, y0, x1, y1) = lefts.iter().flat_map(|s| [s.p0, s.p1]).fold((f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p[0]), m.1.min(p[1]), m.2.max(p[0]), m.3.max(p[1])));
+        let on: Vec<usize> = (0..3).map(|k| lefts.iter().filter(|s| geom::contains(&f0[k], s.midpoint(), 2.0)).count()).collect();
+        eprintln!("plane {k}: {} members (on faces {on:?}), rms {:.2}, support {:.0}, box ({x0:.0},{y0:.0})-({x1:.0},{y1:.0})", p.members.len(), p.rms_px, p.support_px);
+    }
+    for (i, f) in plan.facets.iter().enumerate() {
+        let a: Vec<f64> = f0.iter().map(|g| area_inside(&f.facet.left, g).round()).collect();
+        eprintln!("facet {i}: plane {} area {:.0} on faces {a:?}, {} members", f.facet.plane, geom::area(&f.facet.left), f.facet.members.len());
+    }
+    if let Ok(out) = std::env::var("VISP_OVERLAY") {
+        // Around the cube, scaled 3x.
+        let (x0, y0, k, w, h) = (290.0, 190.0, 3.0, 600u32, 540u32);
+        let mut img = image::RgbImage::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let g = left.get((x0 + x as f64 / k) as usize, (y0 + y as f64 / k) as usize) / 2 + 40;
+                img.put_pixel(x, y, image::Rgb([g, g, g]));
+            }
+        }
+        let mut line = |a: P2, b: P2, col: [u8; 3]| {
+            let n = (geom::dist(a, b) * 2.0 * k) as usize + 1;
+            for i in 0..=n {
+                let t = i as f64 / n as f64;
+                let (x, y) = ((a[0] + t * (b[0] - a[0]) - x0) * k, (a[1] + t * (b[1] - a[1]) - y0) * k);
+                if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
+                    img.put_pixel(x as u32, y as u32, image::Rgb(col));
+                }
+            }
+        };
+        for s in &plan.left_segments {
+            line(s.p0, s.p1, [40, 40, 160]);
+        }
+        for f in &f0 {
+            for i in 0..f.len() {
+                line(f[i], f[(i + 1) % f.len()], [0, 200, 0]);
+            }
+        }
+        const PALETTE: [[u8; 3]; 6] = [[230, 25, 75], [245, 130, 48], [255, 225, 25], [70, 240, 240], [240, 50, 230], [255, 255, 255]];
+        for (i, f) in plan.facets.iter().enumerate() {
+            let p = &f.facet.left;
+            for k in 0..p.len() {
+                line(p[k], p[(k + 1) % p.len()], PALETTE[i % PALETTE.len()]);
+            }
+        }
+        img.save(out).expect("write overlay");
+    }
+}
+

@@ -23,7 +23,31 @@ coordinates the affine model is fitted and facet corners come out in robot coord
 (metres); without them only the epipolar constraint and the disparity limits are fitted.
 The epipolar constraint is then refined from matched junctions (--bootstrap-rounds).
 
+Robot coordinates: from >= 6 calibration points with robot coordinates, not all on one
+plane (the simulator's eight-point cage), each camera's full 3x4 projection is fitted too
+(direct linear transform) and corners are triangulated through it: ~1 mm at 1.6 m. With
+--calib, or fewer points, they come from the affine model, whose weak-perspective error is
+several millimetres at that distance (5-9 mm on the simulator's scenes).
+
 Image coordinates are continuous: pixel (i, j) covers [i, i+1) x [j, j+1).
+
+Output: a summary per facet (polygon in each view, transfer, corners), or with --json one
+object: `facets` (each with `left` and `right` polygons as [[u, v], ...], `transfer`,
+`corners_cyclopean_disparity_px`, and `corners_robot_m` when calibrated), `matches`
+(segment pairs, how each was reconstructed, `ends_robot_m` when calibrated), `timings_ms`
+(one key per stage and `total`), `geometry` (`calibrated`, `pinhole_cameras`, the epipolar
+constraint) and `bootstrap`.
+
+The calibration file (--calib) is the affine stereo model w = M X + c as the daemon saves it
+(the same object may also sit under a \"model\" key):
+  {
+    \"m\": [[au, bu, cu], [av, bv, cv], [au2, bu2, cu2], [av2, bv2, cv2]],
+                        rows u, v (left) and u', v' (right) as linear functions of the robot
+                        point (x, y, z): pixels per metre
+    \"c\": [u0, v0, u0', v0'],      pixels: the image of the robot origin
+    \"disparity_range_px\": [lo, hi], u' - u over the calibration points, pixels
+    \"residual_rms_px\": 0.4         optional: RMS residual of the calibration fit
+  }
 
 Examples:
   handeye snapshot scenarios/pick_cube.toml --out snap
@@ -41,14 +65,16 @@ pub struct PlanArgs {
     #[arg(long, value_name = "PNG")]
     pub right: PathBuf,
     /// Affine stereo model as saved by the daemon: JSON object with `m` (4 rows of 3:
-    /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels) and optionally
-    /// `disparity_range_px` ([lo, hi]) and `residual_rms_px`.
+    /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels), `disparity_range_px`
+    /// ([lo, hi] pixels) and optionally `residual_rms_px` (see the format below).
     #[arg(long, value_name = "JSON", conflicts_with = "points", required_unless_present = "points")]
     pub calib: Option<PathBuf>,
-    /// Point correspondences: a JSON list (or an object with a `points` or `cage` list) of
-    /// objects with `left` and `right` ([u, v] pixels) and optionally `robot_m` ([x, y, z]
-    /// metres); `left_px`/`right_px`/`robot` are accepted too. At least 4 points; robot
-    /// coordinates, when given for all, must not be coplanar.
+    /// Point correspondences: the simulator snapshot's cage.json as written (`points_m`,
+    /// `left_px`, `right_px`: index-aligned lists; its pixel centres are at integers, so 0.5 px
+    /// is added to match the planner's convention), or a JSON list (or an object with a
+    /// `points` or `cage` list) of objects with `left` and `right` ([u, v] pixels, pixel (i, j)
+    /// covering [i, i+1) x [j, j+1)) and optionally `robot_m` ([x, y, z] metres). At least 4
+    /// points; robot coordinates, when given for all, must not be coplanar.
     #[arg(long, value_name = "JSON")]
     pub points: Option<PathBuf>,
     /// Print one JSON object (facets, matches, timings) instead of a summary.
@@ -191,10 +217,65 @@ pub fn load_calib(path: &Path) -> Result<AffineStereo> {
 /// One correspondence: `(u, v, u', v')` and the robot point if known.
 pub type Correspondence = ([f64; 4], Option<[f64; 3]>);
 
-/// Loads correspondences (see `--points`).
+/// The simulator's pixel coordinates (`cage.json`, `truth.json`) put pixel centres at integers;
+/// the planner's put pixel `(i, j)` over `[i, i+1) x [j, j+1)`, centre at `(i + 0.5, j + 0.5)`.
+pub const SIMULATOR_TO_PLANNER_PX: f64 = 0.5;
+
+/// Loads correspondences (see `--points`): a list of point objects, an object with such a list
+/// under `points` or `cage`, or the simulator's `cage.json` (parallel lists `points_m`,
+/// `left_px`, `right_px`, pixel centres at integers: shifted by [`SIMULATOR_TO_PLANNER_PX`]).
 pub fn load_points(path: &Path) -> Result<Vec<Correspondence>> {
     let v = read_json(path)?;
-    let list = if v.is_array() { &v } else { v.get("points").or_else(|| v.get("cage")).with_context(|| format!("{}: expected a list, or an object with a `points` or `cage` list", path.display()))? };
+    let out = if v.get("left_px").is_some_and(Value::is_array) && v.get("right_px").is_some_and(Value::is_array) {
+        load_simulator_cage(&v, path)?
+    } else {
+        load_point_list(&v, path)?
+    };
+    if out.len() < 4 {
+        bail!("{}: {} correspondences, need at least 4", path.display(), out.len());
+    }
+    Ok(out)
+}
+
+/// The simulator's `cage.json`: `points_m` (optional), `left_px`, `right_px`, index-aligned.
+fn load_simulator_cage(v: &Value, path: &Path) -> Result<Vec<Correspondence>> {
+    let list = |field: &str| -> Result<Option<&Vec<Value>>> {
+        match v.get(field) {
+            None => Ok(None),
+            Some(x) => x.as_array().map(Some).with_context(|| format!("{}: field `{field}` must be a list", path.display())),
+        }
+    };
+    let empty = Vec::new();
+    let (left, right) = (list("left_px")?.unwrap_or(&empty), list("right_px")?.unwrap_or(&empty));
+    let robot = list("points_m")?;
+    if left.len() != right.len() {
+        bail!("{}: `left_px` has {} points but `right_px` has {}", path.display(), left.len(), right.len());
+    }
+    if let Some(r) = robot
+        && r.len() != left.len()
+    {
+        bail!("{}: `points_m` has {} points but `left_px` has {}", path.display(), r.len(), left.len());
+    }
+    let s = SIMULATOR_TO_PLANNER_PX;
+    let mut out = Vec::with_capacity(left.len());
+    for i in 0..left.len() {
+        let l = numbers(&left[i], 2, path, &format!("left_px[{i}]"))?;
+        let r = numbers(&right[i], 2, path, &format!("right_px[{i}]"))?;
+        let x = match robot {
+            Some(rb) => {
+                let x = numbers(&rb[i], 3, path, &format!("points_m[{i}]"))?;
+                Some([x[0], x[1], x[2]])
+            }
+            None => None,
+        };
+        out.push(([l[0] + s, l[1] + s, r[0] + s, r[1] + s], x));
+    }
+    Ok(out)
+}
+
+/// A list of `{left, right, robot_m?}` objects (or an object holding one as `points`/`cage`).
+fn load_point_list(v: &Value, path: &Path) -> Result<Vec<Correspondence>> {
+    let list = if v.is_array() { v } else { v.get("points").or_else(|| v.get("cage")).with_context(|| format!("{}: expected a list of points, an object with a `points` or `cage` list, or the simulator's cage.json (`points_m`, `left_px`, `right_px`)", path.display()))? };
     let list = list.as_array().with_context(|| format!("{}: `points` must be a list", path.display()))?;
     let mut out = Vec::with_capacity(list.len());
     for (i, p) in list.iter().enumerate() {
@@ -212,20 +293,23 @@ pub fn load_points(path: &Path) -> Result<Vec<Correspondence>> {
         };
         out.push(([l[0], l[1], r[0], r[1]], robot));
     }
-    if out.len() < 4 {
-        bail!("{}: {} correspondences, need at least 4", path.display(), out.len());
-    }
     Ok(out)
 }
 
-/// Stereo geometry from correspondences: the affine model when all have robot coordinates,
-/// else the epipolar constraint alone.
+/// Stereo geometry from correspondences: the affine model (and, from >= 6 non-coplanar
+/// points, the pinhole cameras) when all have robot coordinates, else the epipolar
+/// constraint alone.
 pub fn geometry_from_points(points: &[Correspondence], margin: f64, margin_px: f64, path: &Path) -> Result<(StereoGeometry, &'static str)> {
     let image: Vec<[f64; 4]> = points.iter().map(|p| p.0).collect();
     if points.iter().all(|p| p.1.is_some()) {
         let robot: Vec<Vector3<f64>> = points.iter().filter_map(|p| p.1).map(Vector3::from).collect();
-        let model = AffineStereo::fit(&robot, &image).with_context(|| format!("{}: cannot fit the affine stereo model", path.display()))?;
-        Ok((StereoGeometry::from_model(model, margin, margin_px), "points with robot coordinates (affine model)"))
+        let geo = StereoGeometry::from_calibration_points(&robot, &image, margin, margin_px).with_context(|| format!("{}: cannot fit the affine stereo model", path.display()))?;
+        let source = if geo.projective.is_some() {
+            "points with robot coordinates (affine model; pinhole cameras for the robot coordinates)"
+        } else {
+            "points with robot coordinates (affine model; too few or coplanar points for pinhole cameras)"
+        };
+        Ok((geo, source))
     } else {
         let geo = StereoGeometry::from_correspondences(&image, margin, margin_px).with_context(|| format!("{}: cannot fit the epipolar constraint", path.display()))?;
         Ok((geo, "image correspondences (epipolar constraint only)"))
@@ -306,6 +390,7 @@ pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &Stere
         "geometry": {
             "source": source,
             "calibrated": geo.model.is_some(),
+            "pinhole_cameras": geo.projective.is_some(),
             "disparity_px": geo.disparity_px,
             "epipolar_n": [e.n[0], e.n[1], e.n[2], e.n[3]],
             "epipolar_n0": e.n0,

@@ -12,7 +12,7 @@ use handeye_vision::planner::{Planner, PlannerConfig, Stage, StereoGeometry};
 use nalgebra::Vector3;
 use serde_json::{json, Value};
 
-use crate::cli::plan::{load_gray, timed_plan};
+use crate::cli::plan::{geometry_from_points, load_gray, load_points, timed_plan};
 
 const BENCH_HELP: &str = "\
 Times the planner, stage by stage, on one 640x480 stereo pair and prints the medians (only
@@ -22,10 +22,14 @@ segments per image.
 By default the pair is frames 0 and 40 of the real visp-cube sequence (a textured cube, about
 200 segments per view), with the epipolar constraint fitted from face corners annotated by
 eye in both frames; without the data set, or with --synthetic, a rendered scene of five
-boxes seen by two affine cameras.
+boxes seen by two affine cameras; with --snapshot, a simulator snapshot folder (left.png,
+right.png and cage.json, as `handeye snapshot` writes them), calibrated from its cage as
+`handeye plan --points cage.json` does.
 
-Example:
-  cargo build --release && target/release/handeye bench planner --iterations 50 --json";
+Examples:
+  cargo build --release && target/release/handeye bench planner --iterations 50 --json
+  target/release/handeye snapshot scenarios/clutter3.toml --out /tmp/clutter3
+  target/release/handeye bench planner --snapshot /tmp/clutter3 --iterations 200";
 
 /// Arguments of `handeye bench planner` (see `BENCH_HELP`).
 #[derive(Args, Debug)]
@@ -35,8 +39,11 @@ pub struct PlannerArgs {
     #[arg(long, default_value = "../shared/data/visp-cube", value_name = "DIR")]
     pub data: PathBuf,
     /// Use the rendered five-box scene even when the real pair is available.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "snapshot")]
     pub synthetic: bool,
+    /// Time a simulator snapshot instead: a folder with left.png, right.png and cage.json.
+    #[arg(long, value_name = "DIR")]
+    pub snapshot: Option<PathBuf>,
     /// Timed runs (after two warm-up runs); the median is reported.
     #[arg(long, default_value_t = 30, value_name = "N")]
     pub iterations: usize,
@@ -88,6 +95,14 @@ fn real_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)>
     Ok((left, right, geo, format!("visp-cube frames 0 and 40 ({})", dir.display())))
 }
 
+fn snapshot_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)> {
+    let left = load_gray(&dir.join("left.png"))?;
+    let right = load_gray(&dir.join("right.png"))?;
+    let cage = dir.join("cage.json");
+    let (geo, _) = geometry_from_points(&load_points(&cage)?, 0.5, 10.0, &cage)?;
+    Ok((left, right, geo, format!("simulator snapshot {}", dir.display())))
+}
+
 fn synthetic_pair() -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)> {
     let scene = SynthScene::random(5, 7);
     let pair = scene.render(7);
@@ -103,7 +118,9 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 pub fn run(args: PlannerArgs) -> Result<()> {
-    let (left, right, geo, what) = if args.synthetic || !args.data.join("image0040.png").exists() {
+    let (left, right, geo, what) = if let Some(dir) = &args.snapshot {
+        snapshot_pair(dir)?
+    } else if args.synthetic || !args.data.join("image0040.png").exists() {
         if !args.synthetic {
             eprintln!("note: {} not found; timing the synthetic scene instead", args.data.join("image0040.png").display());
         }

@@ -18,6 +18,9 @@
 
 use super::geom::{self, P2};
 use super::relations::{End, Relations};
+use nalgebra::Vector3;
+
+use super::projective::ProjectiveStereo;
 use super::segments::Segment;
 use crate::affine::{AffineStereo, EpipolarConstraint, FitError};
 
@@ -26,10 +29,18 @@ use crate::affine::{AffineStereo, EpipolarConstraint, FitError};
 #[derive(Debug, Clone, PartialEq)]
 pub struct StereoGeometry {
     pub epipolar: EpipolarConstraint,
+    /// A smooth correction of the linear constraint, fitted by the planner's bootstrap when
+    /// the cameras are not quite affine (`None` from a calibration).
+    pub correction: Option<EpipolarCorrection>,
     /// Allowed horizontal disparity `u' − u`, pixels (margins included).
     pub disparity_px: [f64; 2],
     /// The affine stereo model, when the robot coordinates of the calibration are known.
     pub model: Option<AffineStereo>,
+    /// Pinhole cameras fitted to the same calibration points (>= 6, not coplanar), when
+    /// known: robot coordinates come from these rather than from the affine model, whose
+    /// weak-perspective error is several millimetres at the simulator's distances (see
+    /// [`ProjectiveStereo`]).
+    pub projective: Option<ProjectiveStereo>,
 }
 
 impl StereoGeometry {
@@ -39,7 +50,26 @@ impl StereoGeometry {
     pub fn from_model(model: AffineStereo, margin_frac: f64, margin_px: f64) -> Self {
         let [lo, hi] = model.disparity_range_px;
         let m = margin_frac * (hi - lo) + margin_px;
-        Self { epipolar: model.epipolar(), disparity_px: [lo - m, hi + m], model: Some(model) }
+        Self { epipolar: model.epipolar(), correction: None, disparity_px: [lo - m, hi + m], model: Some(model), projective: None }
+    }
+
+    /// From calibration points with robot coordinates (such as the simulator's cage): the
+    /// affine model as [`from_model`](Self::from_model), and the pinhole cameras for metric
+    /// reconstruction when the points allow them (>= 6, not coplanar); an error when not even
+    /// the affine model can be fitted.
+    pub fn from_calibration_points(robot_m: &[Vector3<f64>], image_px: &[[f64; 4]], margin_frac: f64, margin_px: f64) -> Result<Self, FitError> {
+        let model = AffineStereo::fit(robot_m, image_px)?;
+        Ok(Self { projective: ProjectiveStereo::fit(robot_m, image_px).ok(), ..Self::from_model(model, margin_frac, margin_px) })
+    }
+
+    /// Robot coordinates of the point seen at `w = (u, v, u', v')`: through the pinhole
+    /// cameras when known, else the affine model; `None` when uncalibrated.
+    pub fn robot_point(&self, w: &[f64; 4]) -> Option<[f64; 3]> {
+        match (&self.projective, &self.model) {
+            (Some(p), _) => Some(p.reconstruct(w).into()),
+            (None, Some(m)) => Some(m.reconstruct(w).into()),
+            (None, None) => None,
+        }
     }
 
     /// From `>= 4` correspondences `(u, v, u', v')` without robot coordinates: the epipolar
@@ -48,7 +78,127 @@ impl StereoGeometry {
         let epipolar = EpipolarConstraint::fit(points)?;
         let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| (lo.min(w[2] - w[0]), hi.max(w[2] - w[0])));
         let m = margin_frac * (hi - lo) + margin_px;
-        Ok(Self { epipolar, disparity_px: [lo - m, hi + m], model: None })
+        Ok(Self { epipolar, correction: None, disparity_px: [lo - m, hi + m], model: None, projective: None })
+    }
+
+    /// The epipolar coordinates of this geometry (constraint and correction).
+    pub fn frame(&self) -> EpipolarFrame {
+        EpipolarFrame::with_correction(&self.epipolar, self.correction)
+    }
+}
+
+/// A smooth correction `g` of the linear epipolar constraint, right pixels across the
+/// epipolar lines: a left point `x`'s match lies at `η = η̂(x) + g(x)` (see [`EpipolarFrame`]).
+///
+/// Perspective cameras are affine only to first order: over a workspace seen from ~1.6 m with
+/// a 20° vergence, true correspondences stray up to ~6 px from the best linear constraint of a
+/// calibration cage held above the table, and by different amounts in different parts of the
+/// image (the arm high up, the blocks on the table). A quadratic in the left image position
+/// absorbs most of that; it is fitted to matched junctions by the bootstrap. Outside the box
+/// of the points it was fitted to it is not extrapolated: `g` is evaluated at the nearest
+/// point of that box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpipolarCorrection {
+    /// Coefficients of `1, s, t, s², s·t, t²`, with `(s, t) = (x − centre) / scale`.
+    pub coef: [f64; 6],
+    pub centre: P2,
+    pub scale: f64,
+    /// The box of the fitted points (left pixels).
+    pub lo: P2,
+    pub hi: P2,
+}
+
+impl EpipolarCorrection {
+    /// `g(x)`, right pixels.
+    #[inline]
+    pub fn eval(&self, x: P2) -> f64 {
+        let x = [x[0].clamp(self.lo[0], self.hi[0]), x[1].clamp(self.lo[1], self.hi[1])];
+        let (s, t) = ((x[0] - self.centre[0]) / self.scale, (x[1] - self.centre[1]) / self.scale);
+        let c = &self.coef;
+        c[0] + c[1] * s + c[2] * t + c[3] * s * s + c[4] * s * t + c[5] * t * t
+    }
+
+    /// Least-squares fit of `g` to `(left point, residual)` pairs, with outliers (beyond 2.5
+    /// robust standard deviations, at least 0.5 px) dropped twice. The model grows with the
+    /// data: a constant from 2 points, a plane from 6 spread in two directions, the full
+    /// quadratic from 15 spread over at least 60 px each way. `None` with fewer than 2.
+    pub fn fit(points: &[(P2, f64)]) -> Option<(Self, usize)> {
+        if points.len() < 2 {
+            return None;
+        }
+        let mut keep: Vec<bool> = vec![true; points.len()];
+        let mut out = None;
+        for _ in 0..3 {
+            let kept: Vec<(P2, f64)> = points.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
+            let Some(corr) = Self::fit_once(&kept) else { break };
+            let res: Vec<f64> = points.iter().map(|(x, r)| (r - corr.eval(*x)).abs()).collect();
+            let mut sorted: Vec<f64> = res.iter().zip(&keep).filter(|(_, k)| **k).map(|(r, _)| *r).collect();
+            sorted.sort_by(f64::total_cmp);
+            let cut = (2.5 * 1.4826 * sorted[sorted.len() / 2]).max(0.5);
+            let next: Vec<bool> = res.iter().map(|&r| r <= cut).collect();
+            let n = next.iter().filter(|k| **k).count();
+            out = Some((corr, kept.len()));
+            if next == keep || n < 2 {
+                break;
+            }
+            keep = next;
+        }
+        out
+    }
+
+    fn fit_once(points: &[(P2, f64)]) -> Option<Self> {
+        let n = points.len();
+        if n < 2 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (x, _) in points {
+            lo = [lo[0].min(x[0]), lo[1].min(x[1])];
+            hi = [hi[0].max(x[0]), hi[1].max(x[1])];
+        }
+        let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        let scale = (0.5 * (hi[0] - lo[0]).max(hi[1] - lo[1])).max(1.0);
+        let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
+        // Spread across the points' main direction decides whether a plane is determined.
+        let mean = points.iter().fold([0.0; 2], |a, (x, _)| [a[0] + x[0] / n as f64, a[1] + x[1] / n as f64]);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        for (x, _) in points {
+            let (dx, dy) = (x[0] - mean[0], x[1] - mean[1]);
+            sxx += dx * dx / n as f64;
+            sxy += dx * dy / n as f64;
+            syy += dy * dy / n as f64;
+        }
+        let minor = (0.5 * (sxx + syy) - (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt()).max(0.0).sqrt();
+        let terms = if n >= 15 && w >= 60.0 && h >= 60.0 && minor >= 15.0 {
+            6
+        } else if n >= 6 && minor >= 10.0 {
+            3
+        } else {
+            1
+        };
+        let mut ata = nalgebra::DMatrix::<f64>::zeros(terms, terms);
+        let mut atb = nalgebra::DVector::<f64>::zeros(terms);
+        for (x, r) in points {
+            let (s, t) = ((x[0] - centre[0]) / scale, (x[1] - centre[1]) / scale);
+            let basis = [1.0, s, t, s * s, s * t, t * t];
+            for i in 0..terms {
+                atb[i] += basis[i] * r;
+                for j in 0..terms {
+                    ata[(i, j)] += basis[i] * basis[j];
+                }
+            }
+        }
+        // A little ridge on the non-constant terms keeps a thin spread of points from tilting
+        // the correction wildly.
+        for i in 1..terms {
+            ata[(i, i)] += 1e-3 * n as f64;
+        }
+        let sol = ata.cholesky()?.solve(&atb);
+        let mut coef = [0.0; 6];
+        for i in 0..terms {
+            coef[i] = sol[i];
+        }
+        coef.iter().all(|c| c.is_finite()).then_some(Self { coef, centre, scale, lo, hi })
     }
 }
 
@@ -59,19 +209,25 @@ pub struct EpipolarFrame {
     nr: P2,
     n0: f64,
     inv_nr: f64,
+    correction: Option<EpipolarCorrection>,
 }
 
 impl EpipolarFrame {
     pub fn new(e: &EpipolarConstraint) -> Self {
+        Self::with_correction(e, None)
+    }
+
+    /// With a smooth correction of the constraint (see [`EpipolarCorrection`]).
+    pub fn with_correction(e: &EpipolarConstraint, correction: Option<EpipolarCorrection>) -> Self {
         let nl = [e.n[0], e.n[1]];
         let nr = [e.n[2], e.n[3]];
         let len = geom::norm(nr).max(1e-9);
-        Self { nl, nr, n0: e.n0, inv_nr: 1.0 / len }
+        Self { nl, nr, n0: e.n0, inv_nr: 1.0 / len, correction }
     }
 
-    /// `(n_l, n_r, n0, 1/|n_r|)`.
-    pub fn raw(&self) -> (P2, P2, f64, f64) {
-        (self.nl, self.nr, self.n0, self.inv_nr)
+    /// `(n_r, 1/|n_r|)`: `η` of a right point is `n_r·x' / |n_r|`.
+    pub fn right_normal(&self) -> (P2, f64) {
+        (self.nr, self.inv_nr)
     }
 
     /// `η` of a right point, right pixels across the epipolar lines.
@@ -83,7 +239,11 @@ impl EpipolarFrame {
     /// The `η` a left point's match must have.
     #[inline]
     pub fn eta_left(&self, x: P2) -> f64 {
-        -(geom::dot(self.nl, x) + self.n0) * self.inv_nr
+        let linear = -(geom::dot(self.nl, x) + self.n0) * self.inv_nr;
+        match &self.correction {
+            Some(c) => linear + c.eval(x),
+            None => linear,
+        }
     }
 
     /// Signed distance of right point `xr` from the epipolar line of left point `xl`, right
@@ -111,10 +271,20 @@ impl EpipolarFrame {
         (rate.abs() > 1e-9).then(|| geom::add(p, geom::scale(d, (eta - self.eta_right(p)) / rate)))
     }
 
-    /// The point on the line `p + t·d` (left view) whose `η̂` is `eta`.
+    /// The point on the line `p + t·d` (left view) whose `η̂` is `eta` (with a correction,
+    /// by a few Newton steps on the linear rate: the correction bends `η̂` only slightly).
     pub fn left_point_at(&self, p: P2, d: P2, eta: f64) -> Option<P2> {
         let rate = -geom::dot(self.nl, d) * self.inv_nr;
-        (rate.abs() > 1e-9).then(|| geom::add(p, geom::scale(d, (eta - self.eta_left(p)) / rate)))
+        if rate.abs() <= 1e-9 {
+            return None;
+        }
+        let mut x = geom::add(p, geom::scale(d, (eta - self.eta_left(p)) / rate));
+        if self.correction.is_some() {
+            for _ in 0..3 {
+                x = geom::add(x, geom::scale(d, (eta - self.eta_left(x)) / rate));
+            }
+        }
+        Some(x)
     }
 }
 
@@ -133,11 +303,15 @@ pub struct MatchConfig {
     pub max_contrast_ratio: f64,
     /// Segments within this angle of the epipolar lines are matched by band only, degrees.
     pub epipolar_parallel_deg: f64,
+    /// Also match segments of opposite contrast polarity. An occluding edge borders a
+    /// different surface behind it in each view (a side face seen in one view only, the table
+    /// in the other), so its polarity can flip between views.
+    pub allow_flipped: bool,
 }
 
 impl Default for MatchConfig {
     fn default() -> Self {
-        Self { epipolar_tol_px: 3.0, min_overlap: 0.3, max_turn_deg: 45.0, max_contrast_ratio: 8.0, epipolar_parallel_deg: 10.0 }
+        Self { epipolar_tol_px: 3.0, min_overlap: 0.3, max_turn_deg: 45.0, max_contrast_ratio: 8.0, epipolar_parallel_deg: 10.0, allow_flipped: true }
     }
 }
 
@@ -152,6 +326,9 @@ pub struct Candidate {
     /// Whether either segment runs within `epipolar_parallel_deg` of the epipolar lines, so
     /// that the epipolar constraint does not fix its correspondence along its length.
     pub along_epipolar: bool,
+    /// The two segments have opposite contrast polarity (their directions are opposed: the
+    /// left segment's `p0` corresponds to the right segment's `p1`).
+    pub flipped: bool,
 }
 
 /// All candidates, grouped by left segment (sorted by `(left, right)`).
@@ -186,7 +363,7 @@ fn along(s: &Segment, e: P2, deg: f64) -> bool {
 
 /// Enumerates candidate matches (see the module docs).
 pub fn candidates(left: &[Segment], right: &[Segment], geo: &StereoGeometry, cfg: &MatchConfig) -> Candidates {
-    let ef = EpipolarFrame::new(&geo.epipolar);
+    let ef = geo.frame();
     let tol = cfg.epipolar_tol_px;
     let (el, er) = (ef.left_dir(), ef.right_dir());
     // Right intervals, sorted by start.
@@ -218,8 +395,11 @@ pub fn candidates(left: &[Segment], right: &[Segment], geo: &StereoGeometry, cfg
                 continue;
             }
             let r = &right[ir as usize];
-            // Same polarity and a bounded turn (directions are polarity-oriented).
-            if geom::dot(l.dir(), r.dir()) < cos_turn {
+            // A bounded turn; directions are polarity-oriented, so opposed directions are a
+            // flipped polarity.
+            let cos = geom::dot(l.dir(), r.dir());
+            let flipped = cos < 0.0;
+            if cos.abs() < cos_turn || (flipped && !cfg.allow_flipped) {
                 continue;
             }
             let ratio = l.contrast.max(r.contrast) / l.contrast.min(r.contrast).max(1e-9);
@@ -252,7 +432,7 @@ pub fn candidates(left: &[Segment], right: &[Segment], geo: &StereoGeometry, cfg
             if disp.1 < dmin || disp.0 > dmax {
                 continue;
             }
-            out.list.push(Candidate { left: il as u32, right: ir, overlap_px: overlap, along_epipolar: is_along });
+            out.list.push(Candidate { left: il as u32, right: ir, overlap_px: overlap, along_epipolar: is_along, flipped });
         }
         out.list[first..].sort_by_key(|c| c.right);
         out.offsets.push(out.list.len() as u32);
@@ -273,7 +453,7 @@ pub struct Friendship {
 
 /// Finds the friends among `cands` (see the module docs).
 pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &StereoGeometry, cfg: &MatchConfig) -> Vec<Friendship> {
-    let ef = EpipolarFrame::new(&geo.epipolar);
+    let ef = geo.frame();
     let mut out = Vec::new();
     for jl in &rel_l.junctions {
         for ca in cands.of_left(jl.a) {
@@ -281,10 +461,11 @@ pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &S
             for &jri in rel_r.junctions_of(ra) {
                 let jr = &rel_r.junctions[jri as usize];
                 let (rb, end_rb) = jr.other(ra);
-                if jr.end_of(ra) != jl.end_a || end_rb != jl.end_b {
+                let Some(cb) = cands.find(jl.b, rb) else { continue };
+                // The right ends, seen as the left segments' ends.
+                if as_left(jr.end_of(ra), cands.list[ca].flipped) != jl.end_a || as_left(end_rb, cands.list[cb].flipped) != jl.end_b {
                     continue;
                 }
-                let Some(cb) = cands.find(jl.b, rb) else { continue };
                 if ef.residual(jl.point, jr.point).abs() > cfg.epipolar_tol_px {
                     continue;
                 }
@@ -300,6 +481,15 @@ pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &S
     out.sort_by_key(|f| (f.a, f.b));
     out.dedup_by_key(|f| (f.a, f.b));
     out
+}
+
+/// The end of a left segment that end `e` of its matched right segment corresponds to.
+fn as_left(e: End, flipped: bool) -> End {
+    match (e, flipped) {
+        (End::P0, true) => End::P1,
+        (End::P1, true) => End::P0,
+        (e, _) => e,
+    }
 }
 
 /// Whether a junction end is a true end (L/Y) rather than the interior of a T.
@@ -319,7 +509,7 @@ mod tests {
 
     /// Horizontal epipolar lines: v' = v (n = (0, −1, 0, 1)/√2), disparity in [−40, 0].
     fn rectified() -> StereoGeometry {
-        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), disparity_px: [-40.0, 0.0], model: None }
+        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), correction: None, disparity_px: [-40.0, 0.0], model: None, projective: None }
     }
 
     #[test]
@@ -332,10 +522,16 @@ mod tests {
             seg([85.0, 140.0], [85.0, 190.0]),  // another band
             seg([95.0, 40.0], [96.0, 60.0]),    // overlaps 10 of 20 px: enough
         ];
-        let c = candidates(&left, &right, &rectified(), &MatchConfig::default());
+        let strict = MatchConfig { allow_flipped: false, ..MatchConfig::default() };
+        let c = candidates(&left, &right, &rectified(), &strict);
         let rs: Vec<u32> = c.list.iter().map(|c| c.right).collect();
         assert_eq!(rs, vec![0, 4]);
         assert!(c.find(0, 0).is_some() && c.find(0, 1).is_none());
+        assert!(c.list.iter().all(|c| !c.flipped));
+        // Allowing flips (occluding edges) admits the opposite polarity, marked as such.
+        let c = candidates(&left, &right, &rectified(), &MatchConfig::default());
+        let got: Vec<(u32, bool)> = c.list.iter().map(|c| (c.right, c.flipped)).collect();
+        assert_eq!(got, vec![(0, false), (2, true), (4, false)]);
     }
 
     #[test]

@@ -18,10 +18,16 @@
 //! along the epipolar lines and fit any plane). A seed whose candidates are all members of
 //! one grown hypothesis is skipped (it would grow the same plane again), which keeps the work
 //! near-linear in practice.
+//! A hypothesis whose disparity is pinned only along one line (its junctions and the ends of
+//! its segments that cross the epipolar lines are collinear: a face whose other edges run with
+//! the epipolar lines) may tilt about that line; while growing it tries the candidates that
+//! meet its members at junctions and takes the one that fits and explains most.
 //! Hypothesis selection is greedy: the plane with the most newly explained segment length is
 //! accepted, its matches fix their left segments' correspondences (a segment on a crease may
 //! still belong to several planes, with the same match), and the remaining hypotheses are
-//! re-scored lazily. Last, hypotheses that explain nothing new are accepted when no single
+//! re-scored lazily. A member with no junction partner inside its hypothesis (no friend) may
+//! be an accidental coplanarity: it counts half, and its claim does not exclude another
+//! plane's junction-connected match of the same segment. Last, hypotheses that explain nothing new are accepted when no single
 //! accepted plane holds most of their segments (a face all of whose edges are shared).
 
 use std::collections::BinaryHeap;
@@ -36,6 +42,9 @@ pub use super::transfer::{coverage, line_residuals, stretches_overlap, Transfer,
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlaneConfig {
     /// Largest distance of a transferred left end from the right segment's line, pixels.
+    /// The true transfer of a face puts its edges' segments within ~0.7 px (sub-pixel edges,
+    /// and a face's perspective bending of the affine transfer at ~1.6 m); much more lets a
+    /// transfer straddle two faces where their parallax differs little (the visp-cube pair).
     pub line_tol_px: f64,
     /// Weight of the (weak) epipolar rows relative to the line rows.
     pub epipolar_weight: f64,
@@ -54,11 +63,17 @@ pub struct PlaneConfig {
     /// Largest singular value ratio of `A` accepted (a plane seen at grazing angle in one view
     /// has a very anisotropic transfer; beyond this it is a bad fit).
     pub max_anisotropy: f64,
+    /// A hypothesis's disparity is pinned when the points where it is known (junctions, ends
+    /// of segments that cross the epipolar lines) spread at least this far across their main
+    /// direction, pixels (and a tenth of their extent along it). Otherwise the transfer may
+    /// tilt freely about their line, and the growing hypothesis tries to take in a
+    /// junction-connected candidate that pins it (see `extend_by_friend`).
+    pub min_anchor_spread_px: f64,
 }
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { line_tol_px: 1.2, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0 }
+        Self { line_tol_px: 0.9, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0, min_anchor_spread_px: 3.0 }
     }
 }
 
@@ -199,6 +214,12 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
             if members.len() < 2 || round == 3 {
                 break;
             }
+            if !determined(inp, &ctx, &members, cfg)
+                && let Some((t2, m2)) = extend_by_friend(inp, &ctx, &members, &local, &mut scratch, cfg, p)
+            {
+                t = t2;
+                members = m2;
+            }
             match refit(inp, &members, adj, &mut scratch, cfg, p) {
                 Some(t2) if plausible(&t2, cfg) && epipolar_consistent(&t2, inp, &members) => t = t2,
                 _ => break,
@@ -226,6 +247,80 @@ pub fn find_planes(inp: &PlaneInput, cfg: &PlaneConfig) -> Vec<Plane> {
         hyps.push(Hypothesis { transfer: t, members, pool: local.clone() });
     }
     select(inp, hyps, &ctx, cfg)
+}
+
+/// Whether the disparity of a plane with these members is pinned: the points where it is
+/// known (junctions between members, ends of members that cross the epipolar lines) spread
+/// in two directions (see [`PlaneConfig::min_anchor_spread_px`]).
+fn determined(inp: &PlaneInput, ctx: &Ctx, members: &[u32], cfg: &PlaneConfig) -> bool {
+    let mut pts: Vec<P2> = Vec::new();
+    for &m in members {
+        if !ctx.weak[m as usize] {
+            let l = &inp.left[inp.cands.list[m as usize].left as usize];
+            pts.extend([l.p0, l.p1]);
+        }
+        for &f in &ctx.adj[m as usize] {
+            let f = &inp.friends[f as usize];
+            if f.a == m && members.contains(&f.b) {
+                pts.push(f.left_point);
+            }
+        }
+    }
+    if pts.len() < 3 {
+        return false;
+    }
+    let n = pts.len() as f64;
+    let c = pts.iter().fold([0.0; 2], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n]);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in &pts {
+        let (x, y) = (p[0] - c[0], p[1] - c[1]);
+        sxx += x * x / n;
+        sxy += x * y / n;
+        syy += y * y / n;
+    }
+    let tr = 0.5 * (sxx + syy);
+    let d = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+    let (major, minor) = ((tr + d).sqrt(), (tr - d).max(0.0).sqrt());
+    minor >= cfg.min_anchor_spread_px.max(0.1 * major)
+}
+
+/// An under-determined hypothesis (see [`determined`]) tries each candidate that meets one of
+/// its members at a junction seen in both views: refitted with it (and that junction point),
+/// does it still fit every member, and how much does it then explain? The best such
+/// extension is returned, preferring one that pins the disparity.
+fn extend_by_friend(inp: &PlaneInput, ctx: &Ctx, members: &[u32], pool: &[u32], scratch: &mut [bool], cfg: &PlaneConfig, origin: P2) -> Option<(Transfer, Vec<u32>)> {
+    let mut tried: Vec<u32> = Vec::new();
+    for &m in members {
+        for &f in &ctx.adj[m as usize] {
+            let f = &inp.friends[f as usize];
+            let o = if f.a == m { f.b } else { f.a };
+            let left = inp.cands.list[o as usize].left;
+            if !tried.contains(&o) && !members.iter().any(|&x| inp.cands.list[x as usize].left == left) {
+                tried.push(o);
+            }
+        }
+    }
+    tried.truncate(16);
+    let mut best: Option<((bool, usize), Transfer, Vec<u32>)> = None;
+    let mut trial: Vec<u32> = Vec::with_capacity(members.len() + 1);
+    for c in tried {
+        trial.clear();
+        trial.extend_from_slice(members);
+        trial.push(c);
+        let Some(t) = refit(inp, &trial, &ctx.adj, scratch, cfg, origin) else { continue };
+        if !plausible(&t, cfg) || !epipolar_consistent(&t, inp, &trial) || !trial.iter().all(|&x| supports(&t, inp, x, cfg)) {
+            continue;
+        }
+        let grown = support(&t, inp, ctx, pool, cfg);
+        if !grown.contains(&c) {
+            continue;
+        }
+        let key = (determined(inp, ctx, &grown, cfg), grown.len());
+        if best.as_ref().is_none_or(|b| key > b.0) {
+            best = Some((key, t, grown));
+        }
+    }
+    best.map(|(_, t, m)| (t, m))
 }
 
 fn plausible(t: &Transfer, cfg: &PlaneConfig) -> bool {
@@ -328,6 +423,12 @@ fn refit(inp: &PlaneInput, members: &[u32], adj: &[Vec<u32>], scratch: &mut [boo
 struct Claim {
     right: u32,
     stretch: (f64, f64),
+    /// Claimed by a member that meets a fellow member at a junction seen in both views (a
+    /// friend). A member without one may be an accidental coplanarity (an edge far away that
+    /// happens to fit the transfer, typical of edges running with the epipolar lines or of
+    /// the vertical edges of another object), so its claim does not exclude another plane's
+    /// anchored match of the same stretch.
+    hard: bool,
 }
 
 /// Greedy hypothesis selection with lazy re-scoring.
@@ -335,29 +436,48 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig)
     let adj = &ctx.adj;
     let mut scratch = vec![false; inp.cands.list.len()];
     let mut claims: Vec<Vec<Claim>> = vec![Vec::new(); inp.left.len()];
+    // Per hypothesis and member: whether it has a friend among the hypothesis's members.
+    let anchored: Vec<Vec<bool>> = hyps
+        .iter()
+        .map(|h| {
+            h.members
+                .iter()
+                .map(|&m| {
+                    adj[m as usize].iter().any(|&f| {
+                        let f = &inp.friends[f as usize];
+                        let other = if f.a == m { f.b } else { f.a };
+                        h.members.contains(&other)
+                    })
+                })
+                .collect()
+        })
+        .collect();
     // Per member: (left, right, stretch covered, matched length).
     let info = |h: &Hypothesis, m: u32| {
         let c = &inp.cands.list[m as usize];
         let cov = coverage(&h.transfer, &inp.left[c.left as usize], &inp.right[c.right as usize]);
         (c.left as usize, c.right, cov, cov.1 - cov.0)
     };
-    // 0: new, 1: already claimed with this right segment, 2: conflicts with a claim.
-    let status = |claims: &[Vec<Claim>], l: usize, r: u32, cov: (f64, f64)| -> u8 {
+    // 0: new, 1: already claimed with this right segment, 2: conflicts with a claim (an
+    // anchored member conflicts only with hard claims).
+    let status = |claims: &[Vec<Claim>], l: usize, r: u32, cov: (f64, f64), anchored: bool| -> u8 {
         if claims[l].iter().any(|c| c.right == r) {
             1
-        } else if claims[l].iter().any(|c| stretches_overlap(c.stretch, cov)) {
+        } else if claims[l].iter().any(|c| (c.hard || !anchored) && stretches_overlap(c.stretch, cov)) {
             2
         } else {
             0
         }
     };
-    let score = |h: &Hypothesis, claims: &[Vec<Claim>]| -> (f64, usize, usize) {
+    // Newly explained length (unanchored members count half), new and acceptable members.
+    let score = |hi: usize, claims: &[Vec<Claim>]| -> (f64, usize, usize) {
+        let h = &hyps[hi];
         let (mut s, mut new, mut ok) = (0.0, 0, 0);
-        for &m in &h.members {
+        for (k, &m) in h.members.iter().enumerate() {
             let (l, r, cov, w) = info(h, m);
-            match status(claims, l, r, cov) {
+            match status(claims, l, r, cov, anchored[hi][k]) {
                 0 => {
-                    s += w;
+                    s += if anchored[hi][k] { w } else { 0.5 * w };
                     new += 1;
                     ok += 1;
                 }
@@ -380,20 +500,20 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig)
             self.0.total_cmp(&o.0).then(o.1.cmp(&self.1))
         }
     }
-    let mut heap: BinaryHeap<Item> = hyps.iter().enumerate().map(|(i, h)| Item(score(h, &claims).0, i)).collect();
+    let mut heap: BinaryHeap<Item> = (0..hyps.len()).map(|i| Item(score(i, &claims).0, i)).collect();
     let mut accepted: Vec<usize> = Vec::new();
     let mut deferred: Vec<usize> = Vec::new();
     let accept = |i: usize, claims: &mut Vec<Vec<Claim>>, accepted: &mut Vec<usize>| {
-        for &m in &hyps[i].members {
+        for (k, &m) in hyps[i].members.iter().enumerate() {
             let (l, r, cov, _) = info(&hyps[i], m);
-            if status(claims, l, r, cov) == 0 {
-                claims[l].push(Claim { right: r, stretch: cov });
+            if status(claims, l, r, cov, anchored[i][k]) == 0 {
+                claims[l].push(Claim { right: r, stretch: cov, hard: anchored[i][k] });
             }
         }
         accepted.push(i);
     };
     while let Some(Item(s, i)) = heap.pop() {
-        let (now, new, ok) = score(&hyps[i], &claims);
+        let (now, new, ok) = score(i, &claims);
         if now < s - 1e-9 {
             // Stale: re-queue with the current score.
             if now > 0.0 {
@@ -415,16 +535,16 @@ fn select(inp: &PlaneInput, hyps: Vec<Hypothesis>, ctx: &Ctx, cfg: &PlaneConfig)
     let mut rest: Vec<(f64, usize)> = deferred
         .into_iter()
         .map(|i| {
-            let total: f64 = hyps[i].members.iter().map(|&m| info(&hyps[i], m)).filter(|x| status(&claims, x.0, x.1, x.2) != 2).map(|x| x.3).sum();
+            let total: f64 = hyps[i].members.iter().enumerate().map(|(k, &m)| (k, info(&hyps[i], m))).filter(|(k, x)| status(&claims, x.0, x.1, x.2, anchored[i][*k]) != 2).map(|(_, x)| x.3).sum();
             (total, i)
         })
         .collect();
     rest.sort_by(|a, b| b.0.total_cmp(&a.0));
     for (_, i) in rest {
-        let ok: Vec<u32> = hyps[i].members.iter().copied().filter(|&m| {
+        let ok: Vec<u32> = hyps[i].members.iter().enumerate().filter(|&(k, &m)| {
             let (l, r, cov, _) = info(&hyps[i], m);
-            status(&claims, l, r, cov) != 2
-        }).collect();
+            status(&claims, l, r, cov, anchored[i][k]) != 2
+        }).map(|(_, &m)| m).collect();
         let total: f64 = ok.iter().map(|&m| info(&hyps[i], m).3).sum();
         if ok.len() < cfg.min_members || total < cfg.min_support_px {
             continue;

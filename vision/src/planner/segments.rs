@@ -194,6 +194,8 @@ impl SegmentDetector {
             }
         }
         self.merge_across_gaps();
+        let min_len = self.config.min_length_px;
+        self.segments.retain(|s| s.length() >= min_len);
         &self.segments
     }
 
@@ -380,11 +382,25 @@ impl SegmentDetector {
             gmag += ((p.gx * p.gx + p.gy * p.gy) as f64).sqrt();
         }
         let seg = make_segment(&sums, self.pts[s], self.pts[e], g, gmag)?;
-        (seg.length() >= cfg.min_length_px && seg.rms_px <= cfg.max_rms_px).then_some((seg, sums, g, gmag))
+        // Short pieces are kept for now: the staircase of a nearly axis-parallel edge (aliased
+        // rendering, or a sensor without blur) jogs by a pixel, and the piece beyond the jog
+        // may be short; it merges with its neighbour below, and what stays short is dropped
+        // at the end.
+        (seg.length() >= SHORT_PIECE_PX && seg.rms_px <= cfg.max_rms_px).then_some((seg, sums, g, gmag))
     }
 
     fn try_merge(&self, a: &(Segment, LineSums, P2, f64), b: &(Segment, LineSums, P2, f64)) -> Option<(Segment, LineSums, P2, f64)> {
-        if a.0.angle_to(&b.0) > self.config.merge_angle_deg.to_radians() || geom::dot(a.0.dir(), b.0.dir()) <= 0.0 {
+        if geom::dot(a.0.dir(), b.0.dir()) <= 0.0 {
+            return None;
+        }
+        // A short piece next to a longer one is often no edge of its own: the staircase of a
+        // nearly axis-parallel edge (aliased rendering, a sensor without blur) jogs by a
+        // pixel, and smoothing turns the jog and the rounded corner beyond it into a short,
+        // tilted piece. It joins when the joint line passes within `JOG_PX` of its ends; a
+        // real edge at an angle strays further within a few pixels.
+        let shorter = a.0.length().min(b.0.length());
+        let jog = shorter < JOG_PIECE_PX && a.0.angle_to(&b.0) < JOG_MAX_ANGLE_DEG.to_radians();
+        if !jog && a.0.angle_to(&b.0) > self.merge_angle(shorter) {
             return None;
         }
         let mut sums = a.1;
@@ -392,8 +408,18 @@ impl SegmentDetector {
         let g = geom::add(a.2, b.2);
         let seg = make_segment(&sums, a.0.p0, b.0.p1, g, a.3 + b.3)?;
         // Both pieces' ends must stay on the joint line.
-        let ok = [a.0.p0, a.0.p1, b.0.p0, b.0.p1].iter().all(|p| seg.line_distance(*p).abs() <= self.config.split_tol_px);
+        let tol = if jog { JOG_PX } else { self.config.split_tol_px };
+        let ok = [a.0.p0, a.0.p1, b.0.p0, b.0.p1].iter().all(|p| seg.line_distance(*p).abs() <= tol);
         (ok && seg.rms_px <= self.config.max_rms_px).then_some((seg, sums, g, a.3 + b.3))
+    }
+
+    /// Largest angle between two pieces that may merge, the shorter `shorter_px` long,
+    /// radians: `merge_angle_deg`, or more for a short piece, whose direction is uncertain
+    /// (on a weak edge, noise tilts a 12 px piece by several degrees): as much as turns it
+    /// by `split_tol_px` over its length. The joint fit must still pass near all four ends.
+    fn merge_angle(&self, shorter_px: f64) -> f64 {
+        let cfg = &self.config;
+        cfg.merge_angle_deg.to_radians().max((cfg.split_tol_px / shorter_px.max(1.0)).atan())
     }
 
     /// Merges collinear pieces of different chains whose facing ends are within
@@ -433,7 +459,7 @@ impl SegmentDetector {
                         if !(-1.0..=gap).contains(&g) || geom::dist(a.p1, b.p0) > gap + 1.0 {
                             continue;
                         }
-                        if a.angle_to(b) > self.config.merge_angle_deg.to_radians() || geom::dot(a.dir(), b.dir()) <= 0.0 {
+                        if a.angle_to(b) > self.merge_angle(a.length().min(b.length())) || geom::dot(a.dir(), b.dir()) <= 0.0 {
                             continue;
                         }
                         // Lateral offsets both ways within the split tolerance.
@@ -482,6 +508,16 @@ impl SegmentDetector {
         }
     }
 }
+
+/// Pieces shorter than this are not kept even for merging, pixels.
+const SHORT_PIECE_PX: f64 = 4.0;
+
+/// A piece shorter than this (pixels), turned by less than `JOG_MAX_ANGLE_DEG` from its
+/// neighbour in the chain, may be a staircase jog: it merges when the joint line passes
+/// within `JOG_PX` of its ends (see `try_merge`).
+const JOG_PIECE_PX: f64 = 16.0;
+const JOG_MAX_ANGLE_DEG: f64 = 15.0;
+const JOG_PX: f64 = 1.6;
 
 /// A segment from its fit sums, the first and last points (projected onto the line) and the
 /// summed gradient (for the orientation).

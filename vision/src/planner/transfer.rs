@@ -92,13 +92,13 @@ impl TransferFit {
         }
     }
 
-    /// Left point `a` and its transfer obey the epipolar constraint.
+    /// Left point `a` and its transfer obey the epipolar constraint: `η(A a + b) = η̂(a)`.
     pub fn add_epipolar(&mut self, ef: &EpipolarFrame, a: P2, w: f64) {
-        let (nl, nr, n0, k) = ef.raw();
+        let (nr, k) = ef.right_normal();
         let x = geom::sub(a, self.origin);
         let c = [nr[0] * x[0], nr[0] * x[1], nr[1] * x[0], nr[1] * x[1], nr[0], nr[1]];
         // Scaled to right pixels.
-        self.row(c.map(|v| v * k), -(geom::dot(nl, a) + n0) * k, w);
+        self.row(c.map(|v| v * k), ef.eta_left(a), w);
     }
 
     /// Point correspondence `a` → `a2`.
