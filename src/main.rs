@@ -39,7 +39,7 @@ enum Command {
     Daemon(cli::daemon::DaemonArgs),
     /// Run one closed-loop grasp scenario: simulator and daemon as two processes.
     Run(cli::run::RunArgs),
-    /// Find planar facets (and grasp sites) in one stereo pair.
+    /// Find planar facets in one stereo pair: polygons in both views, 3-D corners.
     Plan(cli::plan::PlanArgs),
     /// Run many closed-loop scenarios and report the success rate.
     Batch(cli::batch::BatchArgs),

@@ -32,16 +32,15 @@ fn assert_picked(r: &RunResult, max_plane_mm: f64, max_angle_deg: f64) {
     assert_eq!(r.sim["commands_rejected"], 0, "{why}");
 }
 
-// Bounds: the issue asks for <= 2 mm and <= 1° at convergence. The plane error meets it on
-// every run measured (BENCHMARKS.md); the angle does on about half of the seeds (0.02-4.2°),
-// limited by how well a 40 mm facet's orientation is seen at 1.6 m. The tests hold what is
-// achieved, with margin, so that a regression (a wrong goal once left the plate 16 mm off
-// the plane) fails them.
+// Bounds: the issue's, <= 2 mm off the facet's plane and <= 1° from parallel at convergence,
+// for every pick. Measured (BENCHMARKS.md, "Closed loop"): 0.02-0.9 mm and 0.01-0.54° over
+// the scenarios and ten seeds of pick_cube; a goal imaged once from one look at the wedge's
+// small triangle had left the plate 3.8 mm and 4.6° off.
 
 #[test]
 fn pick_cube_grasps_and_lifts() {
     let r = run("pick_cube.toml", &[]);
-    assert_picked(&r, 2.0, 3.0);
+    assert_picked(&r, 2.0, 1.0);
     // Calibration: 8 cage points, residual a few pixels (weak perspective over the cage).
     assert_eq!(r.daemon["calibration"]["points"], 8, "{}", r.explain());
     assert!(r.daemon["calibration"]["residual_rms_px"].as_f64().unwrap() < 8.0);
@@ -54,7 +53,7 @@ fn pick_cube_grasps_and_lifts() {
 #[test]
 fn pick_wedge_grasps_and_lifts() {
     let r = run("pick_wedge.toml", &["--hint"]);
-    assert_picked(&r, 4.0, 5.0);
+    assert_picked(&r, 2.0, 1.0);
 }
 
 /// The left camera is knocked 3° mid-servo: the daemon stops the arm, re-acquires the view,
@@ -62,7 +61,7 @@ fn pick_wedge_grasps_and_lifts() {
 #[test]
 fn pick_cube_bump_recovers_from_the_knocked_camera() {
     let r = run("pick_cube_bump.toml", &[]);
-    assert_picked(&r, 3.0, 4.0);
+    assert_picked(&r, 2.0, 1.0);
     assert_eq!(r.daemon["recoveries"], 1, "{}", r.explain());
     let files: Vec<String> = std::fs::read_dir(&r.out.0).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert!(files.iter().any(|f| f.ends_with("_camera_moved.png")) && files.iter().any(|f| f.ends_with("_reacquired.png")), "{files:?}");
@@ -75,7 +74,7 @@ fn pick_cube_succeeds_over_three_seeds() {
     for seed in [2, 3, 5] {
         let r = run("pick_cube.toml", &["--seed", &seed.to_string()]);
         assert_eq!(r.summary["seed"], seed, "{}", r.explain());
-        assert_picked(&r, 3.0, 5.0);
+        assert_picked(&r, 2.0, 1.0);
     }
 }
 

@@ -1,8 +1,23 @@
 //! The planner on the simulator's snapshots (issue #6 acceptance): the shipped scenarios and
-//! seeded random layouts of 2-5 blocks, rendered by `handeye snapshot` with perspective
-//! cameras (~1.6 m, f = 1800 px), calibrated from the snapshot's cage (`AffineStereo` fitted to
-//! `cage.json`), scored against `truth.json`. See `planner_sim_support::score` for what
-//! "visible", "found" and "spurious" mean.
+//! 25 seeded random layouts of 2-5 blocks (clutter3's cameras, cage, light and arm, rendered
+//! antialiased as the pick scenarios are; blocks placed where both cameras see them whole),
+//! rendered by `handeye snapshot` with
+//! perspective cameras (~1.6 m, f = 1800 px), calibrated from the snapshot's cage as
+//! `handeye plan --points cage.json` does (the affine model for matching, pinhole cameras
+//! fitted to the same eight points for robot coordinates), scored against `truth.json`.
+//!
+//! - A face is considered when the simulator counts more than 400 visible pixels of it in
+//!   both views (`visible_px`: pixels where it is what the camera sees).
+//! - Found: a facet's polygon has IoU >= 0.7 with the face's visible region in each view.
+//! - The gripper is in view: a facet on its plate (truth.json has the plate's polygon) is a
+//!   plate facet, one whose reconstructed centre is off the work surface (the arm's links,
+//!   palm and fingers) an arm facet; both are real planes, listed and not spurious. Any other
+//!   facet that overlaps no block face is spurious.
+//! - Corners: per corner of a found face that shows in both views, the distance to the
+//!   nearest reconstructed corner of its facet, robot frame.
+//!
+//! See `planner_sim_support::score` for the details. Each run prints one line per scene and
+//! one per missed face or spurious facet.
 
 mod planner_sim_support;
 
@@ -15,10 +30,16 @@ fn scenarios_dir() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios"))
 }
 
-/// Snapshots of every shipped scenario and of `random` seeded layouts.
+/// Snapshots of every shipped scenario and of `random` seeded layouts (antialiased unless
+/// `ALIASED` is set: a diagnostic switch, not used by the acceptance test).
 fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
+    snapshots_with(dir, random, std::env::var("ALIASED").is_err())
+}
+
+fn snapshots_with(dir: &Path, random: u64, antialias: bool) -> Vec<Snapshot> {
     let mut shipped: Vec<_> = std::fs::read_dir(scenarios_dir()).expect("scenarios/").filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "toml")).collect();
     shipped.sort();
+    let base_name = "clutter3";
     let base = std::fs::read_to_string(scenarios_dir().join("clutter3.toml")).expect("clutter3.toml");
     let light = Lighting::of_scenario(&base);
     let mut out = Vec::new();
@@ -29,13 +50,15 @@ fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
         out.push(Snapshot::load(&name, &d));
     }
     // The random layouts share clutter3's cameras: blocks go where both see them whole.
-    let cams = out.iter().find(|s: &&Snapshot| s.name == "clutter3").expect("clutter3 snapshot").cameras.clone();
+    // Their edges are antialiased, as the pick scenarios' are (a camera gives a pixel an edge
+    // crosses the mixed grey); clutter3 predates that option.
+    let cams = out.iter().find(|s: &&Snapshot| s.name == base_name).expect("base snapshot").cameras.clone();
     let (w, h) = (out[0].left.width as f64, out[0].left.height as f64);
     let visible = |b: &BlockLayout| in_view(b, &cams, w, h, 5.0);
     for seed in 1..=random {
         let count = 2 + (seed as usize % 4);
         let name = format!("random{seed:02}");
-        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light, &visible));
+        let toml = scenario_toml(&base, &name, seed, &random_layout(seed, count, &light, &visible), antialias);
         let file = dir.join(format!("{name}.toml"));
         std::fs::write(&file, toml).expect("write scenario");
         let d = dir.join(&name);
@@ -45,10 +68,15 @@ fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
     out
 }
 
+/// Random layouts in the acceptance test.
+const RANDOM_LAYOUTS: u64 = 25;
+
 #[test]
 fn snapshots_meet_the_acceptance_measure() {
     let scratch = Scratch::new("planner-sim");
-    let snaps = snapshots(&scratch.0, 10);
+    // 25 layouts (~200 faces with the shipped scenes) rather than the issue's minimum of 10:
+    // the found rate of ~90 faces moves by a few percent with the seeds.
+    let snaps = snapshots_with(&scratch.0, RANDOM_LAYOUTS, true);
     let mut planner = Planner::new(PlannerConfig::default());
     let (mut considered, mut found, mut spurious) = (0, 0, 0);
     let (mut corners, mut corners_affine) = (Vec::new(), Vec::new());
@@ -78,6 +106,44 @@ fn snapshots_meet_the_acceptance_measure() {
     assert!(rate >= 0.9, "found {found} of {considered} faces:\n{text}");
     assert!(spurious_per_scene <= 1.0, "{spurious} spurious facets:\n{text}");
     assert!(med <= 0.003, "median corner error {:.2} mm:\n{text}", med * 1e3);
+}
+
+/// `handeye plan --points cage.json` on a snapshot as the simulator writes it: the pinhole
+/// cameras are fitted from the cage, and the cube's top face comes out with its corners in
+/// robot coordinates within 3 mm of the truth.
+#[test]
+fn plan_cli_reads_the_snapshot_cage() {
+    let scratch = Scratch::new("planner-sim-cli");
+    let dir = scratch.0.join("pick_cube");
+    snapshot(&scenarios_dir().join("pick_cube.toml"), &dir);
+    let snap = Snapshot::load("pick_cube", &dir);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_handeye"))
+        .args(["plan", "--json", "--left"])
+        .arg(dir.join("left.png"))
+        .arg("--right")
+        .arg(dir.join("right.png"))
+        .arg("--points")
+        .arg(dir.join("cage.json"))
+        .output()
+        .expect("run handeye plan");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(v["geometry"]["pinhole_cameras"], serde_json::json!(true), "{}", v["geometry"]);
+    let top = snap.faces.iter().find(|f| f.label == "cube/top").expect("cube/top in truth.json");
+    let poly = |p: &serde_json::Value| -> Vec<[f64; 2]> { p.as_array().expect("polygon").iter().map(|q| [q[0].as_f64().unwrap(), q[1].as_f64().unwrap()]).collect() };
+    let facets = v["facets"].as_array().expect("facets");
+    let best = facets
+        .iter()
+        .max_by(|a, b| {
+            let iou = |f: &serde_json::Value| handeye_vision::planner::geom::polygon_iou(&poly(&f["left"]), &top.polygon[0], 4);
+            iou(a).total_cmp(&iou(b))
+        })
+        .expect("some facet");
+    let iou = handeye_vision::planner::geom::polygon_iou(&poly(&best["left"]), &top.polygon[0], 4);
+    assert!(iou >= 0.7, "best facet on the cube's top: IoU {iou:.2}");
+    let corners: Vec<[f64; 3]> = best["corners_robot_m"].as_array().expect("corners_robot_m").iter().map(|c| [c[0].as_f64().unwrap(), c[1].as_f64().unwrap(), c[2].as_f64().unwrap()]).collect();
+    let errs: Vec<f64> = top.corners_m.iter().map(|t| corners.iter().map(|c| ((c[0] - t[0]).powi(2) + (c[1] - t[1]).powi(2) + (c[2] - t[2]).powi(2)).sqrt()).fold(f64::INFINITY, f64::min)).collect();
+    assert!(median(&errs).unwrap() <= 0.003, "top corners {:?} mm off", errs.iter().map(|e| (e * 1e4).round() / 10.0).collect::<Vec<_>>());
 }
 
 #[test]
@@ -190,7 +256,7 @@ fn diag_trace() {
     use handeye_vision::planner::geom;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
     std::fs::create_dir_all(&dir).unwrap();
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let only = std::env::var("SCENE").ok();
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     let mut cfg = PlannerConfig::default();
@@ -231,6 +297,25 @@ fn diag_trace() {
                 }
                 eprintln!("    edge {k} len {:.0}/{:.0} px, corner epi res {res:.2}: left segs {ls:?} right segs {rs:?} {}", geom::dist(a, b), geom::dist(a2, b2), info.join("; "));
             }
+            // The face's true transfer (least squares through its projected corners) and the
+            // line residuals under it of the segments on its edges.
+            let mut fit = handeye_vision::planner::transfer::TransferFit::new(face.polygon[0][0]);
+            for k in 0..n {
+                fit.add_point(face.polygon[0][k], face.polygon[1][k], 1.0);
+            }
+            if let Some(t) = fit.solve() {
+                let worst = (0..n).map(|k| geom::dist(t.apply(face.polygon[0][k]), face.polygon[1][k])).fold(0.0, f64::max);
+                let mut res = Vec::new();
+                for c in &plan.candidates.list {
+                    let (l, r) = (&plan.left_segments[c.left as usize], &plan.right_segments[c.right as usize]);
+                    let on = |s: &handeye_vision::planner::segments::Segment, p: &[[f64; 2]]| (0..p.len()).any(|k| geom::point_segment_distance(s.p0, p[k], p[(k + 1) % p.len()]) < 1.5 && geom::point_segment_distance(s.p1, p[k], p[(k + 1) % p.len()]) < 1.5);
+                    if on(l, &face.polygon[0]) && on(r, &face.polygon[1]) {
+                        let (rr, _) = handeye_vision::planner::transfer::line_residuals(&t, l, r);
+                        res.push(format!("L{}R{} {:.2}/{:.2}", c.left, c.right, rr[0], rr[1]));
+                    }
+                }
+                eprintln!("    true transfer: corner misfit {worst:.2} px; edge matches {}", res.join(", "));
+            }
         }
     }
 }
@@ -240,7 +325,7 @@ fn diag_trace() {
 fn diag_epipolar() {
     use handeye_vision::affine::EpipolarConstraint;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     for snap in &snaps {
         let geo = snap.geometry(0.5, 10.0);
         let mut w = Vec::new();
@@ -295,7 +380,7 @@ fn diag_face() {
             let s = &segs[i];
             let js: Vec<String> = rel.junctions_of(i as u32).iter().map(|&j| { let j = &rel.junctions[j as usize]; format!("{}{:?}@({:.0},{:.0})", j.other(i as u32).0, j.kind, j.point[0], j.point[1]) }).collect();
             let eta = if v == 0 { (ef.eta_left(s.p0), ef.eta_left(s.p1)) } else { (ef.eta_right(s.p0), ef.eta_right(s.p1)) };
-            eprintln!("  seg {i}: ({:.1},{:.1})-({:.1},{:.1}) len {:.0} contrast {:.1} eta {:.1}..{:.1} junctions {js:?}", s.p0[0], s.p0[1], s.p1[0], s.p1[1], s.length(), s.contrast, eta.0, eta.1);
+            eprintln!("  seg {i}: ({:.1},{:.1})-({:.1},{:.1}) len {:.0} rms {:.2} contrast {:.1} eta {:.1}..{:.1} junctions {js:?}", s.p0[0], s.p0[1], s.p1[0], s.p1[1], s.length(), s.rms_px, s.contrast, eta.0, eta.1);
             if v == 0 {
                 for c in plan.candidates.of_left(i as u32) {
                     let cd = &plan.candidates.list[c];
@@ -336,7 +421,7 @@ fn diag_edges_at() {
 #[ignore]
 fn diag_final_epipolar() {
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let mut planner = Planner::new(PlannerConfig::default());
     for snap in &snaps {
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));
@@ -363,7 +448,7 @@ fn diag_final_epipolar() {
 fn diag_contrast() {
     use handeye_vision::planner::geom;
     let dir = std::path::PathBuf::from("/tmp/pl/diag");
-    let snaps = snapshots(&dir, 10);
+    let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let mut planner = Planner::new(PlannerConfig::default());
     for snap in &snaps {
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));

@@ -171,6 +171,12 @@ fn diag_frames_0_and_40() {
     for (k, f) in f0.iter().enumerate() {
         eprintln!("face {} area {:.0}", FACES[k], geom::area(f));
     }
+    for (k, p) in plan.planes.iter().enumerate() {
+        let lefts: Vec<&handeye_vision::planner::segments::Segment> = p.members.iter().map(|&m| &plan.left_segments[plan.candidates.list[m as usize].left as usize]).collect();
+        let (x0, y0, x1, y1) = lefts.iter().flat_map(|s| [s.p0, s.p1]).fold((f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p[0]), m.1.min(p[1]), m.2.max(p[0]), m.3.max(p[1])));
+        let on: Vec<usize> = (0..3).map(|k| lefts.iter().filter(|s| geom::contains(&f0[k], s.midpoint(), 2.0)).count()).collect();
+        eprintln!("plane {k}: {} members (on faces {on:?}), rms {:.2}, support {:.0}, box ({x0:.0},{y0:.0})-({x1:.0},{y1:.0})", p.members.len(), p.rms_px, p.support_px);
+    }
     for (i, f) in plan.facets.iter().enumerate() {
         let a: Vec<f64> = f0.iter().map(|g| area_inside(&f.facet.left, g).round()).collect();
         eprintln!("facet {i}: plane {} area {:.0} on faces {a:?}, {} members", f.facet.plane, geom::area(&f.facet.left), f.facet.members.len());

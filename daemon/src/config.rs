@@ -311,22 +311,22 @@ pub struct ServoSettings {
     /// Length that turns yaw into a distance for the servo's step metric, m: about the
     /// distance of the marks from the reference point.
     pub yaw_lever_m: f64,
-    /// Smallest accepted condition of the weighted Jacobian (see `ServoConfig`). The angle
-    /// row is weighted by the plate axis's image length per metre (~1200 px), which makes
-    /// it the largest singular value by far (~45000, yaw scaled by `yaw_lever_m`) while the
-    /// three translations are seen with ~600-2000: a sound view of a facet has a condition of
-    /// ~0.01-0.04 (0.013 on a bar face seen straight on), a face seen edge-on drops it
-    /// towards 0.
+    /// Smallest accepted condition of the weighted Jacobian (see `ServoConfig`).
     pub min_condition: f64,
+    /// Weight of the in-plane angle error ρ against the marks' parallaxes (see
+    /// `ServoConfig::angle_weight`); 0 = yaw from the parallaxes alone.
+    pub angle_weight: f64,
     /// Frames to wait after the arm arrives before measuring again.
     pub settle_frames: u32,
     /// Tool speed of servo moves, m/s.
     pub speed_mps: f64,
     /// Height of the tool point above the table (`grasp.table_z_m`) at the grasp, m.
     pub grasp_height_m: f64,
-    /// Half-size of the local cage visited around the coarse approach pose, m: a local
-    /// affine model there takes out the perspective error of the global one (the global
-    /// model's image scale is that of the cage, ~10 % off near the target). 0 = skip.
+    /// Size of the local cage visited around the coarse approach pose, m: 7 points, the
+    /// pose, ±this along x and y, and this and twice this above (never below: the jaws hang
+    /// over the block there). A local affine model there takes out the perspective error of
+    /// the global one (the global model's image scale is that of the cage, ~10 % off near
+    /// the target). 0 = skip.
     pub local_cage_m: f64,
     /// The servo's goal is this far above the grasp pose (the open-loop approach comes down
     /// by it), m.
@@ -348,11 +348,12 @@ impl Default for ServoSettings {
             max_across_px: 25.0,
             max_across_ratio: 0.3,
             yaw_lever_m: 0.025,
-            min_condition: 0.004,
+            min_condition: 0.02,
+            angle_weight: 1.0,
             settle_frames: 2,
             speed_mps: 0.08,
             grasp_height_m: 0.010,
-            local_cage_m: 0.0,
+            local_cage_m: 0.03,
             standoff_above_m: 0.06,
             timeout_s: 90.0,
         }
@@ -588,6 +589,12 @@ impl DaemonConfig {
         }
         if self.servo.max_steps == 0 {
             return bad("servo.max_steps", "0".into(), ">= 1");
+        }
+        if !(self.servo.angle_weight.is_finite() && self.servo.angle_weight >= 0.0) {
+            return bad("servo.angle_weight", self.servo.angle_weight.to_string(), ">= 0");
+        }
+        if !(self.servo.local_cage_m.is_finite() && self.servo.local_cage_m >= 0.0) {
+            return bad("servo.local_cage_m", self.servo.local_cage_m.to_string(), ">= 0 (0 = no local cage)");
         }
         if !(self.servo.standoff_above_m.is_finite() && self.servo.standoff_above_m >= 0.0) {
             return bad("servo.standoff_above_m", self.servo.standoff_above_m.to_string(), ">= 0");

@@ -114,8 +114,40 @@ pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
     AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] }
 }
 
+/// A facet's frames in both views, in *shared* coordinates: each view's frame is the
+/// least-squares affine map from the left template's corners to that view's tracked corners
+/// (the hint gives the corners in the same order in both views). Each tracker's own template
+/// has its origin at its polygon's perimeter centroid, which is not the same point of the
+/// facet in the two views (for a triangle seen from two sides it is off by pixels), and the
+/// plane transfer `b = o' − A o` needs the two origins to be one point. Falls back to
+/// [`facet_frame`] per view when the corner counts differ. No allocation.
 pub fn stereo_frame(left: &ContourTracker, right: &ContourTracker) -> StereoFrame {
-    StereoFrame { left: facet_frame(left), right: facet_frame(right) }
+    let shared = left.template().corners();
+    if shared.len() != right.template().corners().len() {
+        return StereoFrame { left: facet_frame(left), right: facet_frame(right) };
+    }
+    let fit = |t: &ContourTracker| frame_through(shared, || t.corners()).unwrap_or_else(|| facet_frame(t));
+    StereoFrame { left: fit(left), right: fit(right) }
+}
+
+/// The least-squares affine frame `p = o + E q` through template points `q` and image points
+/// `p`, or `None` when the `q` span no plane.
+fn frame_through<I: Iterator<Item = Vector2<f64>>>(q: &[Vector2<f64>], p: impl Fn() -> I) -> Option<AffineFrame> {
+    let n = q.len() as f64;
+    let qm = q.iter().sum::<Vector2<f64>>() / n;
+    let pm = p().sum::<Vector2<f64>>() / n;
+    let (mut qq, mut pq) = (nalgebra::Matrix2::zeros(), nalgebra::Matrix2::zeros());
+    for (q, p) in q.iter().zip(p()) {
+        let (dq, dp) = (q - qm, p - pm);
+        qq += dq * dq.transpose();
+        pq += dp * dq.transpose();
+    }
+    if n < 3.0 || qq.determinant().abs() <= 1e-12 * qq.norm_squared() {
+        return None;
+    }
+    let e = pq * qq.try_inverse()?;
+    let o = pm - e * qm;
+    Some(AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] })
 }
 
 /// Why the plate was not found next to the moving fingers.
@@ -372,5 +404,27 @@ mod tests {
         // No plate: nothing enclosed above the fingers.
         let blank = ImageBuf::filled(320, 240, 110);
         assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
+    }
+
+    /// A triangle seen from two sides has a different shape in each view, so each
+    /// tracker's own template origin (its polygon's perimeter centroid) is a different point
+    /// of the facet. In shared coordinates the plane transfer maps every left corner onto
+    /// its right corner; with per-view frames its offset `b` is pixels off.
+    #[test]
+    fn stereo_frame_puts_both_views_in_shared_coordinates() {
+        let left = [[100.0, 300.0], [160.0, 285.0], [155.0, 200.0]];
+        let right = [[90.0, 310.0], [185.0, 280.0], [140.0, 190.0]];
+        let cfg = handeye_vision::tracker::TrackerConfig::default();
+        let (l, r) = (ContourTracker::new(cfg, &left).unwrap(), ContourTracker::new(cfg, &right).unwrap());
+        let worst = |frames: &StereoFrame| {
+            let t = handeye_vision::servo::PlaneTransfer::from_frames(frames).unwrap();
+            left.iter().zip(&right).map(|(a, b)| (v2(t.apply(a)) - v2(*b)).norm()).fold(0.0, f64::max)
+        };
+        assert!(worst(&stereo_frame(&l, &r)) < 1e-6, "{}", worst(&stereo_frame(&l, &r)));
+        let per_view = StereoFrame { left: facet_frame(&l), right: facet_frame(&r) };
+        assert!(worst(&per_view) > 1.0, "per-view frames transfer the corners within {} px", worst(&per_view));
+        // A corner count that differs between views falls back to per-view frames.
+        let quad = ContourTracker::new(cfg, &[[90.0, 310.0], [185.0, 280.0], [180.0, 200.0], [95.0, 190.0]]).unwrap();
+        assert_eq!(stereo_frame(&l, &quad).right, facet_frame(&quad));
     }
 }

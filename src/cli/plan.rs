@@ -31,6 +31,13 @@ several millimetres at that distance (5-9 mm on the simulator's scenes).
 
 Image coordinates are continuous: pixel (i, j) covers [i, i+1) x [j, j+1).
 
+Output: a summary per facet (polygon in each view, transfer, corners), or with --json one
+object: `facets` (each with `left` and `right` polygons as [[u, v], ...], `transfer`,
+`corners_cyclopean_disparity_px`, and `corners_robot_m` when calibrated), `matches`
+(segment pairs, how each was reconstructed, `ends_robot_m` when calibrated), `timings_ms`
+(one key per stage and `total`), `geometry` (`calibrated`, `pinhole_cameras`, the epipolar
+constraint) and `bootstrap`.
+
 The calibration file (--calib) is the affine stereo model w = M X + c as the daemon saves it
 (the same object may also sit under a \"model\" key):
   {
@@ -58,8 +65,8 @@ pub struct PlanArgs {
     #[arg(long, value_name = "PNG")]
     pub right: PathBuf,
     /// Affine stereo model as saved by the daemon: JSON object with `m` (4 rows of 3:
-    /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels) and optionally
-    /// `disparity_range_px` ([lo, hi]) and `residual_rms_px`.
+    /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels), `disparity_range_px`
+    /// ([lo, hi] pixels) and optionally `residual_rms_px` (see the format below).
     #[arg(long, value_name = "JSON", conflicts_with = "points", required_unless_present = "points")]
     pub calib: Option<PathBuf>,
     /// Point correspondences: the simulator snapshot's cage.json as written (`points_m`,

@@ -3,11 +3,31 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::{Mutex, MutexGuard};
 
 use serde_json::Value;
 
 pub fn scenario(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios").join(name)
+}
+
+/// Holds the machine for one closed loop at a time. Each loop is a lockstep simulator
+/// rendering on the CPU plus a daemon with frame deadlines; several at once on a 2-core
+/// machine starve each other until a daemon rightly calls its camera dead.
+pub fn one_at_a_time() -> MutexGuard<'static, ()> {
+    static LOOP: Mutex<()> = Mutex::new(());
+    // A test that failed while holding it leaves nothing behind that matters here.
+    LOOP.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A copy of a shipped scenario in `dir` with 4x multisampling off: a third of the render
+/// time, for tests whose point is timing (a daemon with a 100 ms stale-frame guard) rather
+/// than sub-pixel accuracy.
+pub fn scenario_without_antialias(name: &str, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(scenario(name)).unwrap();
+    let out = dir.join(name);
+    std::fs::write(&out, text.replace("antialias = true", "antialias = false")).unwrap();
+    out
 }
 
 /// A fresh temporary folder, removed on drop.
@@ -38,6 +58,7 @@ pub struct RunResult {
 }
 
 pub fn run(scenario_file: &str, extra: &[&str]) -> RunResult {
+    let _one = one_at_a_time();
     let out = TempDir::new(scenario_file.trim_end_matches(".toml"));
     let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
         .arg("run")

@@ -13,6 +13,11 @@ use handeye_vision::planner::{Plan, StereoGeometry};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
+mod debug;
+mod layout;
+pub use debug::*;
+pub use layout::*;
+
 /// The simulator's pixel coordinates put pixel centres at integers; the planner's put pixel
 /// `(i, j)` over `[i, i+1) x [j, j+1)`, centre at `(i + 0.5, j + 0.5)`.
 pub const SIM_TO_PLANNER_PX: f64 = 0.5;
@@ -33,209 +38,6 @@ impl Drop for Scratch {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
-}
-
-/// SplitMix64: a tiny seeded generator, so the layouts do not depend on any crate's stream.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed ^ 0x5eed_5eed_1234_abcd)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
-
-/// One block of a generated layout.
-#[derive(Debug, Clone)]
-pub struct BlockLayout {
-    pub kind: &'static str,
-    pub size_mm: [f64; 3],
-    pub position_m: [f64; 2],
-    pub yaw_deg: f64,
-    /// Albedo per face, in the simulator's face order of the kind.
-    pub shades: Vec<f64>,
-}
-
-/// Where random blocks are placed: the shipped scenarios' workspace in front of the arm,
-/// inside the calibration cage's footprint (x 0.27..0.45 m, y -0.10..0.10 m) and a little
-/// around it.
-pub const WORKSPACE_X_M: [f64; 2] = [0.25, 0.47];
-pub const WORKSPACE_Y_M: [f64; 2] = [-0.14, 0.14];
-
-/// The scene's lighting as the renderer applies it: a face of albedo `s` and outward normal
-/// `n` shows grey `s · (ambient + intensity · max(0, n·l))`.
-#[derive(Debug, Clone, Copy)]
-pub struct Lighting {
-    pub towards_light: [f64; 3],
-    pub intensity: f64,
-    pub ambient: f64,
-    pub table_shade: f64,
-}
-
-impl Lighting {
-    /// From a scenario's `[light]` and `[table]`.
-    pub fn of_scenario(toml_text: &str) -> Self {
-        let doc: toml::Table = toml_text.parse().expect("scenario TOML");
-        let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)).expect("number");
-        let light = doc["light"].as_table().expect("[light]");
-        let d: Vec<f64> = light["direction"].as_array().expect("direction").iter().map(num).collect();
-        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        Self {
-            towards_light: [d[0] / len, d[1] / len, d[2] / len],
-            intensity: num(&light["intensity"]),
-            ambient: num(&light["ambient"]),
-            table_shade: num(&doc["table"].as_table().expect("[table]")["shade"]),
-        }
-    }
-
-    /// Grey level (0..1) of a face of albedo `shade` and normal `n`.
-    pub fn grey(&self, shade: f64, n: [f64; 3]) -> f64 {
-        let l = self.towards_light;
-        (shade * (self.ambient + self.intensity * (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).max(0.0))).clamp(0.0, 1.0)
-    }
-}
-
-/// Outward normals of a block's faces in the block frame, in the simulator's face order
-/// (`sim/README.md`), bottom faces as `None` (never seen).
-fn face_normals(kind: &str, size_mm: [f64; 3]) -> Vec<Option<[f64; 3]>> {
-    let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
-    let neg = |v: [f64; 3]| [-v[0], -v[1], -v[2]];
-    match kind {
-        "cube" | "bar" => vec![Some(x), Some(neg(x)), Some(y), Some(neg(y)), Some(z), None],
-        "wedge" => {
-            // The slope rises from -x to +x over the whole length.
-            let (l, h) = (size_mm[0], size_mm[2]);
-            let n = (l * l + h * h).sqrt();
-            vec![Some(neg(y)), Some(y), None, Some(x), Some([-h / n, 0.0, l / n])]
-        }
-        "l_block" => vec![Some(neg(y)), Some(y), None, Some(x), Some(z), Some(neg(x)), Some(z), Some(neg(x))],
-        _ => panic!("unknown kind {kind}"),
-    }
-}
-
-/// Random albedos for a block's faces such that, as rendered, every seen face differs by at
-/// least `min_contrast` (0..1) from the table and from the block's other seen faces: the
-/// design's "distinct face brightness so edges show". (The simulator's own seeded shades, a
-/// shuffle of distinct albedos, do not look at the lighting: a face can render at the table's
-/// grey and its outline vanish.)
-fn contrasting_shades(rng: &mut Rng, kind: &str, size_mm: [f64; 3], yaw_deg: f64, light: &Lighting, min_contrast: f64) -> Vec<f64> {
-    let (s, c) = yaw_deg.to_radians().sin_cos();
-    let normals: Vec<Option<[f64; 3]>> = face_normals(kind, size_mm).into_iter().map(|n| n.map(|n| [c * n[0] - s * n[1], s * n[0] + c * n[1], n[2]])).collect();
-    let table = light.grey(light.table_shade, [0.0, 0.0, 1.0]);
-    for _ in 0..100_000 {
-        let shades: Vec<f64> = normals.iter().map(|_| (rng.range(0.2, 0.95) * 100.0).round() / 100.0).collect();
-        let greys: Vec<f64> = normals.iter().zip(&shades).filter_map(|(n, &a)| n.map(|n| light.grey(a, n))).collect();
-        let apart = greys.iter().enumerate().all(|(i, g)| (g - table).abs() >= min_contrast && greys[..i].iter().all(|h| (g - h).abs() >= min_contrast));
-        if apart {
-            return shades;
-        }
-    }
-    panic!("no contrasting shades for a {kind} at yaw {yaw_deg}");
-}
-
-/// Least rendered contrast of the random layouts' faces with the table and with each other:
-/// 12 grey levels of 255 (sensor noise is 1.5).
-pub const MIN_CONTRAST: f64 = 12.0 / 255.0;
-
-/// The corners of a block's bounding box (it stands on the table), robot frame.
-pub fn box_corners_m(b: &BlockLayout) -> Vec<[f64; 3]> {
-    let (s, c) = b.yaw_deg.to_radians().sin_cos();
-    let [hx, hy, h] = [0.5e-3 * b.size_mm[0], 0.5e-3 * b.size_mm[1], 1e-3 * b.size_mm[2]];
-    let mut out = Vec::with_capacity(8);
-    for (x, y) in [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)] {
-        for z in [0.0, h] {
-            out.push([b.position_m[0] + c * x - s * y, b.position_m[1] + s * x + c * y, z]);
-        }
-    }
-    out
-}
-
-/// Whether both cameras see the whole block, `margin_px` inside the image.
-pub fn in_view(b: &BlockLayout, cameras: &[Camera; 2], width: f64, height: f64, margin_px: f64) -> bool {
-    box_corners_m(b).iter().all(|x| {
-        cameras.iter().all(|cam| {
-            let p = cam.project(*x);
-            p[0] >= margin_px && p[0] <= width - margin_px && p[1] >= margin_px && p[1] <= height - margin_px
-        })
-    })
-}
-
-/// A seeded layout of `count` blocks: kinds cube/bar/wedge/l_block, sides 20-60 mm, random
-/// yaw and shades ([`contrasting_shades`]), footprints (their circumscribed circles plus
-/// 15 mm) not overlapping, each seen whole by both cameras (`visible`: a facet ends at the
-/// block's edges, and the image border is none).
-pub fn random_layout(seed: u64, count: usize, light: &Lighting, visible: &dyn Fn(&BlockLayout) -> bool) -> Vec<BlockLayout> {
-    const KINDS: [&str; 4] = ["cube", "bar", "wedge", "l_block"];
-    let mut rng = Rng::new(seed);
-    let mut blocks: Vec<BlockLayout> = Vec::new();
-    let radius = |b: &BlockLayout| 0.5e-3 * b.size_mm[0].hypot(b.size_mm[1]);
-    let mut attempts = 0;
-    while blocks.len() < count {
-        attempts += 1;
-        assert!(attempts < 10_000, "seed {seed}: cannot place {count} blocks");
-        let kind = KINDS[rng.below(KINDS.len())];
-        let mut size_mm = [rng.range(20.0, 60.0), rng.range(20.0, 60.0), rng.range(20.0, 60.0)].map(|s| s.round());
-        if kind == "cube" {
-            size_mm = [size_mm[0]; 3];
-        }
-        let position_m = [rng.range(WORKSPACE_X_M[0], WORKSPACE_X_M[1]), rng.range(WORKSPACE_Y_M[0], WORKSPACE_Y_M[1])];
-        let yaw_deg = rng.range(-180.0, 180.0).round();
-        let shades = contrasting_shades(&mut rng, kind, size_mm, yaw_deg, light, MIN_CONTRAST);
-        let b = BlockLayout { kind, size_mm, position_m, yaw_deg, shades };
-        let clear = blocks.iter().all(|o| {
-            let d = (b.position_m[0] - o.position_m[0]).hypot(b.position_m[1] - o.position_m[1]);
-            d > radius(&b) + radius(o) + 0.015
-        });
-        if clear && visible(&b) {
-            blocks.push(b);
-        }
-    }
-    blocks
-}
-
-/// A scenario file: `base` (a shipped scenario: its cameras, table, light, cage, arm) with
-/// its blocks, task and events replaced by `blocks`.
-pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout]) -> String {
-    let mut doc: toml::Table = base.parse().expect("shipped scenario is valid TOML");
-    doc.insert("name".into(), toml::Value::String(name.into()));
-    doc.insert("description".into(), toml::Value::String(format!("random layout, seed {seed}")));
-    doc.insert("seed".into(), toml::Value::Integer(seed as i64));
-    doc.remove("events");
-    if std::env::var("AA").is_ok() {
-        doc.get_mut("render").and_then(|r| r.as_table_mut()).expect("[render]").insert("antialias".into(), toml::Value::Boolean(true));
-    }
-    let arr: Vec<toml::Value> = blocks
-        .iter()
-        .enumerate()
-        .map(|(i, b)| {
-            let mut t = toml::Table::new();
-            t.insert("name".into(), toml::Value::String(format!("b{i}_{}", b.kind)));
-            t.insert("kind".into(), toml::Value::String(b.kind.into()));
-            t.insert("size_mm".into(), toml::Value::Array(b.size_mm.iter().map(|&v| toml::Value::Float(v)).collect()));
-            t.insert("position_m".into(), toml::Value::Array(b.position_m.iter().map(|&v| toml::Value::Float(v)).collect()));
-            t.insert("yaw_deg".into(), toml::Value::Float(b.yaw_deg));
-            t.insert("shades".into(), toml::Value::Array(b.shades.iter().map(|&v| toml::Value::Float(v)).collect()));
-            toml::Value::Table(t)
-        })
-        .collect();
-    doc.insert("blocks".into(), toml::Value::Array(arr));
-    let mut task = toml::Table::new();
-    task.insert("target".into(), toml::Value::String(format!("b0_{}", blocks[0].kind)));
-    doc.insert("task".into(), toml::Value::Table(task));
-    toml::to_string(&doc).expect("serialise scenario")
 }
 
 /// Runs `handeye snapshot SCENARIO --out DIR`.
@@ -329,17 +131,8 @@ impl Snapshot {
         let cameras = [0, 1].map(|k| {
             let c = &truth["cameras"][k];
             let rows: Vec<Vec<f64>> = c["pixel_from_robot"].as_array().expect("matrix").iter().map(f64s).collect();
-            let mut m = [[0.0; 4]; 3];
-            for r in 0..3 {
-                for col in 0..4 {
-                    m[r][col] = rows[r][col];
-                }
-            }
             // Shift to planner pixels: u + 0.5 = (row0 + 0.5 row2)·X / row2·X.
-            for col in 0..4 {
-                m[0][col] += SIM_TO_PLANNER_PX * m[2][col];
-                m[1][col] += SIM_TO_PLANNER_PX * m[2][col];
-            }
+            let m: [[f64; 4]; 3] = [0, 1, 2].map(|r| [0, 1, 2, 3].map(|col| rows[r][col] + if r < 2 { SIM_TO_PLANNER_PX * rows[2][col] } else { 0.0 }));
             let p = f64s(&c["position_m"]);
             Camera { position_m: Vector3::new(p[0], p[1], p[2]), pixel_from_robot: m }
         });
@@ -462,6 +255,28 @@ impl FaceIds {
         if uni == 0 { 0.0 } else { inter as f64 / uni as f64 }
     }
 
+    /// Both views' face ids, keeping in each only the pixels whose point the other camera
+    /// sees too: what a stereo planner can match. (A face partly hidden in one view, by
+    /// another block or by its own block's other part, shows more in the other view than can
+    /// be matched there.)
+    pub fn seen_by_both(snap: &Snapshot, ids: &[FaceIds; 2]) -> [FaceIds; 2] {
+        [0, 1].map(|v| {
+            let (cam, other) = (&snap.cameras[v], &snap.cameras[1 - v]);
+            let mut out = ids[v].ids.clone();
+            for (i, id) in out.iter_mut().enumerate() {
+                let Some(fi) = id.checked_sub(1).map(|f| f as usize) else { continue };
+                let f = &snap.faces[fi];
+                let p = [(i % ids[v].width) as f64 + 0.5, (i / ids[v].width) as f64 + 0.5];
+                let (n, c0, d) = (Vector3::from(f.normal), Vector3::from(f.corners_m[0]), cam.ray(p));
+                let x = cam.position_m + d * (n.dot(&(c0 - cam.position_m)) / n.dot(&d));
+                if ids[1 - v].at(other.project(x.into())) != Some(fi) {
+                    *id = 0;
+                }
+            }
+            FaceIds { width: ids[v].width, height: ids[v].height, ids: out }
+        })
+    }
+
     /// The face seen at pixel point `p`, if any.
     pub fn at(&self, p: P2) -> Option<usize> {
         if p[0] < 0.0 || p[1] < 0.0 {
@@ -540,9 +355,10 @@ impl SceneScore {
 /// Scores a plan against the snapshot's truth:
 /// - a face is *considered* when the simulator counts more than 400 visible pixels of it in
 ///   both views (`visible_px`);
-/// - it is *found* when a facet's polygon has IoU >= 0.7 with the face's visible region
-///   (the pixels where it is what the camera sees, from our z-buffer of the faces) in each
-///   view: a face partly hidden by another block is judged on what can be seen of it;
+/// - it is *found* when a facet's polygon has IoU >= 0.7 with the face's visible region in
+///   each view: the pixels where it is what the camera sees (from our z-buffer of the
+///   faces) and the other camera sees that point of it too ([`FaceIds::seen_by_both`]), so a
+///   face partly hidden in one view or both is judged on what stereo can match of it;
 /// - a facet is a block facet when its left IoU with some visible face is >= 0.3, a plate
 ///   facet when that holds for the gripper plate's polygon, an arm facet when its
 ///   reconstructed centroid is off the work surface ([`on_work_surface`]); else spurious;
@@ -563,6 +379,7 @@ pub fn score(snap: &Snapshot, plan: &Plan) -> SceneScore {
             }
         }
     }
+    let both = FaceIds::seen_by_both(snap, &ids);
     let mut faces = Vec::new();
     let mut corner_errors_m = Vec::new();
     let mut corner_errors_affine_m = Vec::new();
@@ -573,7 +390,7 @@ pub fn score(snap: &Snapshot, plan: &Plan) -> SceneScore {
         }
         let mut best = FaceScore { face: fi, facet: None, iou: [0.0; 2], found: false };
         for (k, r) in plan.facets.iter().enumerate() {
-            let iou = [ids[0].iou(&r.facet.left, fi), ids[1].iou(&r.facet.right, fi)];
+            let iou = [both[0].iou(&r.facet.left, fi), both[1].iou(&r.facet.right, fi)];
             if (iou[0].min(iou[1]), iou[0] + iou[1]) > (best.iou[0].min(best.iou[1]), best.iou[0] + best.iou[1]) {
                 best = FaceScore { face: fi, facet: Some(k), iou, found: iou[0] >= MIN_IOU && iou[1] >= MIN_IOU };
             }
@@ -677,121 +494,4 @@ pub fn report(snap: &Snapshot, plan: &Plan, s: &SceneScore) -> String {
         let _ = writeln!(out, "    note: {label} shows {sim} px in the simulator, {ours} px by the block faces alone (the arm hides part)");
     }
     out
-}
-
-/// Debug aid: both views side by side around the blocks, scaled up, truth faces in green,
-/// facets in colour, matched segments in white; written to `path`.
-pub fn debug_overlay(snap: &Snapshot, plan: &Plan, path: &Path) {
-    let pts: Vec<P2> = snap.faces.iter().flat_map(|f| f.polygon[0].iter().chain(&f.polygon[1]).copied()).collect();
-    let (x0, y0, x1, y1) = pts.iter().fold((f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p[0]), m.1.min(p[1]), m.2.max(p[0]), m.3.max(p[1])));
-    let (x0, y0) = ((x0 - 10.0).max(0.0), (y0 - 10.0).max(0.0));
-    let (x1, y1) = ((x1 + 10.0).min(snap.left.width as f64), (y1 + 10.0).min(snap.left.height as f64));
-    let k = 3.0;
-    let (w, h) = (((x1 - x0) * k) as u32, ((y1 - y0) * k) as u32);
-    let mut img = image::RgbImage::new(2 * w + 4, h);
-    for (v, view) in [&snap.left, &snap.right].into_iter().enumerate() {
-        let dx = v as u32 * (w + 4);
-        for y in 0..h {
-            for x in 0..w {
-                let (sx, sy) = ((x0 + x as f64 / k) as usize, (y0 + y as f64 / k) as usize);
-                let g = view.get(sx.min(view.width - 1), sy.min(view.height - 1)) / 2 + 40;
-                img.put_pixel(x + dx, y, image::Rgb([g, g, g]));
-            }
-        }
-    }
-    let mut line = |v: usize, a: P2, b: P2, col: [u8; 3]| {
-        let dx = v as f64 * (w + 4) as f64;
-        let n = (geom::dist(a, b) * k * 2.0).ceil() as usize + 1;
-        for i in 0..=n {
-            let t = i as f64 / n as f64;
-            let (x, y) = ((a[0] + t * (b[0] - a[0]) - x0) * k, (a[1] + t * (b[1] - a[1]) - y0) * k);
-            if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
-                img.put_pixel(x as u32 + dx as u32, y as u32, image::Rgb(col));
-            }
-        }
-    };
-    for f in &snap.faces {
-        for v in 0..2 {
-            if f.visible_px[v] > 0.0 {
-                let p = &f.polygon[v];
-                for i in 0..p.len() {
-                    line(v, p[i], p[(i + 1) % p.len()], [0, 160, 0]);
-                }
-            }
-        }
-    }
-    for m in &plan.matches {
-        let (l, r) = (&plan.left_segments[m.left as usize], &plan.right_segments[m.right as usize]);
-        line(0, l.p0, l.p1, [255, 255, 255]);
-        line(1, r.p0, r.p1, [255, 255, 255]);
-    }
-    const PALETTE: [[u8; 3]; 8] = [[230, 25, 75], [0, 130, 200], [245, 130, 48], [145, 30, 180], [70, 240, 240], [240, 50, 230], [210, 245, 60], [255, 225, 25]];
-    for (i, f) in plan.facets.iter().enumerate() {
-        let col = PALETTE[i % PALETTE.len()];
-        for (v, p) in [(0, &f.facet.left), (1, &f.facet.right)] {
-            for j in 0..p.len() {
-                line(v, p[j], p[(j + 1) % p.len()], col);
-            }
-        }
-    }
-    img.save(path).expect("write debug overlay");
-}
-
-/// Debug aid: one face's truth (green) and a facet (red) in both views, around the face,
-/// scaled 5x, with all matched segments (white) and all segments (dark blue).
-pub fn debug_face(snap: &Snapshot, plan: &Plan, face: usize, facet: Option<usize>, path: &Path) {
-    let f = &snap.faces[face];
-    let pts: Vec<P2> = f.polygon[0].iter().chain(&f.polygon[1]).copied().collect();
-    let (x0, y0, x1, y1) = pts.iter().fold((f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p[0]), m.1.min(p[1]), m.2.max(p[0]), m.3.max(p[1])));
-    let (x0, y0) = ((x0 - 25.0).max(0.0), (y0 - 25.0).max(0.0));
-    let (x1, y1) = ((x1 + 25.0).min(snap.left.width as f64), (y1 + 25.0).min(snap.left.height as f64));
-    let k = 5.0;
-    let (w, h) = (((x1 - x0) * k) as u32, ((y1 - y0) * k) as u32);
-    let mut img = image::RgbImage::new(2 * w + 4, h);
-    for (v, view) in [&snap.left, &snap.right].into_iter().enumerate() {
-        let dx = v as u32 * (w + 4);
-        for y in 0..h {
-            for x in 0..w {
-                let (sx, sy) = ((x0 + x as f64 / k) as usize, (y0 + y as f64 / k) as usize);
-                let g = view.get(sx.min(view.width - 1), sy.min(view.height - 1)) / 2 + 40;
-                img.put_pixel(x + dx, y, image::Rgb([g, g, g]));
-            }
-        }
-    }
-    let mut line = |v: usize, a: P2, b: P2, col: [u8; 3]| {
-        let dx = v as f64 * (w + 4) as f64;
-        let n = (geom::dist(a, b) * k * 2.0).ceil() as usize + 1;
-        for i in 0..=n {
-            let t = i as f64 / n as f64;
-            let (x, y) = ((a[0] + t * (b[0] - a[0]) - x0) * k, (a[1] + t * (b[1] - a[1]) - y0) * k);
-            if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
-                img.put_pixel(x as u32 + dx as u32, y as u32, image::Rgb(col));
-            }
-        }
-    };
-    for (v, segs) in [(0, &plan.left_segments), (1, &plan.right_segments)] {
-        for s in segs.iter() {
-            line(v, s.p0, s.p1, [40, 40, 200]);
-        }
-    }
-    for m in &plan.matches {
-        let (l, r) = (&plan.left_segments[m.left as usize], &plan.right_segments[m.right as usize]);
-        line(0, l.p0, l.p1, [255, 255, 255]);
-        line(1, r.p0, r.p1, [255, 255, 255]);
-    }
-    for v in 0..2 {
-        let p = &f.polygon[v];
-        for i in 0..p.len() {
-            line(v, p[i], p[(i + 1) % p.len()], [0, 200, 0]);
-        }
-    }
-    if let Some(fi) = facet {
-        let r = &plan.facets[fi];
-        for (v, p) in [(0, &r.facet.left), (1, &r.facet.right)] {
-            for j in 0..p.len() {
-                line(v, p[j], p[(j + 1) % p.len()], [255, 40, 40]);
-            }
-        }
-    }
-    img.save(path).expect("write debug face");
 }

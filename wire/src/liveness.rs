@@ -2,6 +2,7 @@
 
 use std::time::{Duration, Instant};
 
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
@@ -45,6 +46,23 @@ impl Liveness {
     /// Time until the next periodic check.
     pub(crate) fn until_due(&self) -> Duration {
         self.next_check.saturating_duration_since(Instant::now())
+    }
+
+    /// Sleeps on `listener` until an event arrives, `deadline` passes or the next periodic
+    /// check is due (at least 1 ms). A publisher's arrival or departure makes the next check
+    /// due at once. An interrupt signal ends the nap early without error: the caller's loop
+    /// then sees the termination request. The error is the listener's failure, as text.
+    pub(crate) fn nap(&mut self, listener: &Listener<ipc::Service>, deadline: Instant) -> Result<(), String> {
+        let nap = deadline.saturating_duration_since(Instant::now()).min(self.until_due()).max(Duration::from_millis(1));
+        let mut lifecycle = false;
+        match listener.timed_wait(|ev| lifecycle |= is_lifecycle_event(ev.id.as_value()), nap) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+            Err(e) => return Err(format!("{e:?}")),
+        }
+        if lifecycle {
+            self.force();
+        }
+        Ok(())
     }
 
     pub(crate) fn check_if_due<P, H>(&mut self, service: &PubSubFactory<ipc::Service, P, H>) -> Option<LivenessChange>

@@ -392,16 +392,9 @@ impl<T: WireMessage> MessageSubscriber<T> {
             if now >= deadline {
                 return Ok(MessageEvent::Timeout);
             }
-            let nap = (deadline - now).min(self.liveness.until_due()).max(Duration::from_millis(1));
-            let mut lifecycle = false;
-            match self.listener.timed_wait(|ev| lifecycle |= is_lifecycle_event(ev.id.as_value()), nap) {
-                Ok(_) => {}
-                Err(ListenerWaitError::InterruptSignal) => {}
-                Err(e) => return Err(MessageWaitError::Listener { service: T::SERVICE, detail: format!("{e:?}") }),
-            }
-            if lifecycle {
-                self.liveness.force();
-            }
+            self.liveness
+                .nap(&self.listener, deadline)
+                .map_err(|detail| MessageWaitError::Listener { service: T::SERVICE, detail })?;
         }
     }
 

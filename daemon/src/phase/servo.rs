@@ -10,31 +10,46 @@
 //! can shift. Within the plane, the reference point goes straight above the facet's centre,
 //! high enough that the tool point is `grasp_height_m + standoff_above_m` above the table:
 //! the jaws, `tool_from_reference` behind the plate, then hang behind the facet plane and
-//! above the block. That in-plane offset becomes `(s*, t*)` by [`ServoGoal::offset_by`]; the
-//! goal angle is that of the plate's horizontal axis within the facet. The grasp then moves
-//! by metric offsets the robot's kinematics make exact: along the plate normal until the
-//! jaw centre is `depth/2` behind the facet, and down to the grasp height.
+//! above the block. The goal is held in the facet's frame in metres ([`FacetGoal`]: the
+//! reference point and the marks relative to the facet origin, the plate axis along the
+//! facet) and turned into image terms at every step, with the target frames averaged since
+//! the last step, so that the facet's transfer errors (extrapolated ~140 px from a facet
+//! 30-60 px across) are the same in measurement and goal and cancel. Its height comes from
+//! the robot's kinematics ([`FacetGoal::image_goal_at_height`]). The facet's normal is the
+//! direction of the model's parallax gradient through the facet's transfer, so the marks'
+//! goal parallaxes differ only by what the images say. The grasp then moves by metric
+//! offsets the robot's kinematics make exact: along the plate normal (as the servo left it)
+//! until the jaw centre is `depth/2` behind the facet, and down to the grasp height.
 //!
 //! **Coarse approach, local cage.** The servo starts from the goal pose as the global model
-//! reconstructs it (a `MoveTo`), then visits a small cage around it (±`local_cage_m`) and
-//! fits a local affine model: the global model's image scale is the cage's, while near the
-//! target it differs by ~10 % (perspective), and the metric stand-off offsets are converted
-//! with it. The servo and its goal use the local model.
+//! reconstructs it (a `MoveTo`), then visits a small cage around it (`local_cage_m`
+//! sideways and up, never down: the jaws hang over the block) and fits a local affine model:
+//! the global model's image scale is the cage's, while near the target it differs by ~10 %
+//! (perspective). The servo's Jacobian, the facet's normal and the image goal use the local
+//! model. A camera knocked before the local fit restarts the cage.
 //!
 //! **Yaw centre.** The servo turns about the plate's reference point; the robot turns about
 //! the tool point. Each move is converted: `Δtool = Δref + (Rz(Δψ) − I)(tool − ref)`, with
 //! `tool − ref` from the gripper model at the current yaw.
 
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::servo::{CoplanarityServo, GripperView, Motion, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoPoint};
+use handeye_vision::servo::{
+    CoplanarityServo, FacetGoal, GripperView, Motion, PlaneTransfer, ServoConfig, ServoModel, StepOutcome, StereoFrame, StereoPoint,
+};
 use handeye_vision::tracker::{Role, View};
 use nalgebra::Vector3;
 
 use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, ServoTraceRow, Step};
 use crate::gripper::{gripper_view, stereo_frame};
 
-/// Offsets of the local cage points from the approach pose, in units of `local_cage_m`.
-const LOCAL_CAGE: [[f64; 3]; 7] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+/// Offsets of the local cage points from the approach pose, in units of `local_cage_m`:
+/// sideways at the approach height and upwards, never down (the jaws hang right above the
+/// block there).
+const LOCAL_CAGE: [[f64; 3]; 7] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 2.0]];
+
+/// A target frame further than this from the running mean (any of its origin or basis
+/// vectors' ends, px) means the target moved: the mean starts again from it.
+const TARGET_JUMP_PX: f64 = 3.0;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
@@ -46,24 +61,83 @@ enum Stage {
     Servo { converging: bool },
 }
 
+/// Running mean of the target's stereo frame. The target stands still while the servo
+/// works, so its trackers' frame-to-frame jitter (tenths of a pixel per corner, amplified
+/// some fivefold at the plate) averages out; a jump starts the mean again. No allocation.
+#[derive(Debug, Clone, Copy, Default)]
+struct TargetMean {
+    sum: [f64; 12],
+    n: u32,
+}
+
+impl TargetMean {
+    fn flat(f: &StereoFrame) -> [f64; 12] {
+        let (l, r) = (&f.left, &f.right);
+        [l.o[0], l.o[1], l.e1[0], l.e1[1], l.e2[0], l.e2[1], r.o[0], r.o[1], r.e1[0], r.e1[1], r.e2[0], r.e2[1]]
+    }
+
+    fn add(&mut self, f: &StereoFrame) {
+        let x = Self::flat(f);
+        if !x.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        if let Some(mean) = self.mean() {
+            let m = Self::flat(&mean);
+            // Origin and the ends of the basis vectors (origin + e), each view.
+            let far = |k: usize| {
+                let d = |i: usize| (x[k + i] - m[k + i], x[k + i + 1] - m[k + i + 1]);
+                let (o, e1, e2) = (d(0), d(2), d(4));
+                let len = |a: (f64, f64)| a.0.hypot(a.1);
+                len(o).max(len((o.0 + e1.0, o.1 + e1.1))).max(len((o.0 + e2.0, o.1 + e2.1))) > TARGET_JUMP_PX
+            };
+            if far(0) || far(6) {
+                *self = Self::default();
+            }
+        }
+        for (s, v) in self.sum.iter_mut().zip(x) {
+            *s += v;
+        }
+        self.n += 1;
+    }
+
+    fn mean(&self) -> Option<StereoFrame> {
+        if self.n == 0 {
+            return None;
+        }
+        let k = f64::from(self.n);
+        let s = self.sum.map(|v| v / k);
+        let frame = |i: usize| handeye_vision::servo::AffineFrame { o: [s[i], s[i + 1]], e1: [s[i + 2], s[i + 3]], e2: [s[i + 4], s[i + 5]] };
+        Some(StereoFrame { left: frame(0), right: frame(6) })
+    }
+}
+
 pub struct ServoPhase {
     start_frame: u64,
     stage: Stage,
     wait: Option<MoveWait>,
     servo: CoplanarityServo,
     config: ServoConfig,
-    goal: ServoGoal,
-    /// Metric offset of the reference point's goal from the facet centre, robot frame.
+    /// The goal in the facet's frame, metric; turned into image terms at every step with
+    /// the target as seen then (see `FacetGoal`).
+    goal: FacetGoal,
+    /// Metric offset of the reference point's goal from the facet origin, robot frame.
     offset_m: Vector3<f64>,
-    /// Horizontal axis of the plate at the goal (robot frame), for the goal angle.
-    plate_a: Vector3<f64>,
+    /// Target frames since the last servo step (for the step's measurement and goal)...
+    target_recent: TargetMean,
+    /// ...and since the local cage began (for the facet's orientation in the local model).
+    target_cage: TargetMean,
     approach_pose: ([f64; 3], f64),
     local_robot_m: Vec<Vector3<f64>>,
     local_image_px: Vec<[f64; 4]>,
     acc: [f64; 7],
+    /// The planned grasp site in the target trackers' templates (left, right), if planned.
+    site_template: Option<[[f64; 2]; 2]>,
+    /// Depth of the block behind the facet, m.
+    depth_m: f64,
     /// The open-loop move from the servo's goal (plate coplanar with the facet) to above the
-    /// grasp: along the facet normal until the jaw centre is `depth/2` behind the facet, m.
-    /// The grasp then comes straight down.
+    /// grasp: along the plate normal until the jaw centre is `depth/2` behind the facet, m.
+    /// Set again from the plate's final yaw when the servo converges. The grasp then comes
+    /// straight down.
     pub approach_m: [f64; 3],
 }
 
@@ -72,45 +146,69 @@ fn wrap(a: f64) -> f64 {
     a - t * ((a + std::f64::consts::PI) / t).floor()
 }
 
-/// `tool − reference` in the robot frame at yaw `yaw_rad`.
-pub fn tool_from_reference(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
+/// Unit plate normal in the robot frame at yaw `yaw_rad` (horizontal).
+fn plate_normal(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
     let n0 = m.cfg.gripper.normal_at_zero_yaw;
     let (s, c) = yaw_rad.sin_cos();
-    let n = Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).normalize();
+    Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).normalize()
+}
+
+/// `tool − reference` in the robot frame at yaw `yaw_rad`.
+pub fn tool_from_reference(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
+    let n = plate_normal(m, yaw_rad);
     let up = Vector3::z();
     let a = up.cross(&n);
     let t = m.cfg.gripper.tool_from_reference_m;
     a * t[0] + up * t[1] + n * t[2]
 }
 
-fn views(m: &Mission) -> Result<(handeye_vision::servo::StereoFrame, GripperView), String> {
+fn views(m: &Mission) -> Result<(StereoFrame, GripperView), String> {
     let get = |role, view| m.trackers.get(role, view).ok_or_else(|| format!("servo: no {role:?} tracker in the {view:?} view"));
     let target = stereo_frame(get(Role::Target, View::Left)?, get(Role::Target, View::Right)?);
     let gripper = gripper_view(&m.plate, get(Role::Gripper, View::Left)?, get(Role::Gripper, View::Right)?);
     Ok((target, gripper))
 }
 
-/// The image goal for a metric `offset` of the reference point from the facet centre, and
-/// the plate's horizontal axis `a` lying along the facet.
-fn goal_for(model: &ServoModel, m_full: &nalgebra::Matrix4x3<f64>, m: &Mission, offset: &Vector3<f64>, a: &Vector3<f64>) -> Result<ServoGoal, String> {
-    let (target, gripper) = views(m)?;
-    let ma = m_full * a;
-    let axis_view = GripperView { axis: StereoPoint { left: [ma[0], ma[1]], right: [ma[2], ma[3]] }, ..gripper };
-    let angle_rad = ServoGoal::teach(model, &target, &axis_view).map_err(|e| format!("servo: goal angle: {e}"))?.angle_rad;
-    // The offset is in the facet's plane, yet its parallax through the model is not quite
-    // zero: the model's view of the plane carries the perspective of the scene, and so does
-    // the affine plane transfer extrapolated from the small facet up to the plate. Keeping
-    // the model's parallax cancels much of that bias (forcing zero left the plate 3-9 mm off
-    // the plane over ten seeds, against 0.1-1.9 mm).
-    let goal = ServoGoal { st: [0.0, 0.0], angle_rad, parallax_px: [0.0; 3] }.offset_by(model, &target, offset).map_err(|e| format!("servo: goal: {e}"))?;
-    // Per mark, at the mark's own place in the plane (the model's bias is not uniform).
-    let g = &m.cfg.gripper;
-    let mut parallax_px = [0.0; 3];
-    for (p, mark) in parallax_px.iter_mut().zip(g.marks_m) {
-        let d = offset + a * (mark[0] - g.reference_m[0]) + Vector3::z() * (mark[1] - g.reference_m[1]);
-        *p = model.parallax_for_offset(&target, &d).map_err(|e| format!("servo: goal: {e}"))?;
+/// The facet's horizontal unit normal, towards the cameras, as the model sees the target:
+/// the direction of the parallax gradient `ê_rᵀ (M_r − A M_l)`, the one motion that moves a
+/// point off the facet's plane in the images. Directions in the facet then have zero
+/// parallax by construction, so the marks' goal parallaxes differ only by the facet's own
+/// measured transfer, not by the model's reconstruction of the facet's tilt (which under
+/// perspective is off by a degree or more, and would leave the plate turned by as much).
+fn facet_normal(model: &ServoModel, toward_cameras: &Vector3<f64>, target: &StereoFrame) -> Result<Vector3<f64>, String> {
+    let transfer = PlaneTransfer::from_frames(target).map_err(|e| format!("servo: target: {e}"))?;
+    let mut n: Vector3<f64> = model.parallax_gradient(&transfer).transpose();
+    if n.norm().is_nan() || n.norm() <= 1e-9 {
+        return Err("servo: the target facet has no parallax gradient (seen edge-on?)".into());
     }
-    Ok(ServoGoal { parallax_px, ..goal })
+    n /= n.norm();
+    if n.dot(toward_cameras) < 0.0 {
+        n = -n;
+    }
+    if n.z.abs() > 25f64.to_radians().sin() {
+        return Err(format!("servo: the target facet is {:.0}° from vertical; the jaws close horizontally", n.z.abs().asin().to_degrees()));
+    }
+    Ok(Vector3::new(n.x, n.y, 0.0).normalize())
+}
+
+/// The metric goal for a reference-point `offset` from the facet origin, with the plate's
+/// horizontal axis `a` lying along the facet: every mark at its place in the facet's plane.
+fn facet_goal(m: &Mission, offset: &Vector3<f64>, a: &Vector3<f64>) -> FacetGoal {
+    let g = &m.cfg.gripper;
+    let at = |p: [f64; 2]| offset + a * (p[0] - g.reference_m[0]) + Vector3::z() * (p[1] - g.reference_m[1]);
+    FacetGoal { reference_m: *offset, marks_m: g.marks_m.map(at), axis: *a }
+}
+
+/// How far the planned grasp site (template points `st`, left and right view) lies from the
+/// target's frame origin along the facet's horizontal axis `a`, m, as `model` reconstructs
+/// both from the target trackers now (the calibration lever cancels in the difference).
+fn site_along_m(m: &Mission, model: &ServoModel, st: &[[f64; 2]; 2], a: &Vector3<f64>) -> Result<f64, String> {
+    let (target, _) = views(m)?;
+    let at = |view, k: usize| m.trackers.get(Role::Target, view).map(|t| t.image_from_template(nalgebra::Vector2::new(st[k][0], st[k][1])));
+    let (Some(l), Some(r)) = (at(View::Left, 0), at(View::Right, 1)) else { return Err("servo: no target trackers".into()) };
+    let site = model.reconstruct(&StereoPoint { left: [l.x, l.y], right: [r.x, r.y] });
+    let origin = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o });
+    Ok(a.dot(&(site - origin)))
 }
 
 impl ServoPhase {
@@ -133,45 +231,26 @@ impl ServoPhase {
             max_across_ratio: s.max_across_ratio,
             yaw_lever_m: s.yaw_lever_m,
             min_condition: s.min_condition,
+            angle_weight: s.angle_weight,
             ..ServoConfig::default()
         };
         let servo = CoplanarityServo::new(cal.servo_model, config).map_err(|e| format!("servo: {e}"))?;
         let (target, _) = views(m)?;
         let model = &cal.servo_model;
-        // Facet normal from the reconstructed basis, horizontal, towards the cameras.
-        let d1 = model.reconstruct_direction(&StereoPoint { left: target.left.e1, right: target.right.e1 });
-        let d2 = model.reconstruct_direction(&StereoPoint { left: target.left.e2, right: target.right.e2 });
-        let mut n = d1.cross(&d2);
-        if n.norm().is_nan() || n.norm() <= 1e-12 {
-            return Err("servo: the target facet reconstructs as a line".into());
-        }
-        n /= n.norm();
-        if n.dot(&cal.model.toward_cameras()) < 0.0 {
-            n = -n;
-        }
-        if n.z.abs() > 25f64.to_radians().sin() {
-            return Err(format!("servo: the target facet is {:.0}° from vertical; the jaws close horizontally", n.z.abs().asin().to_degrees()));
-        }
-        let n = Vector3::new(n.x, n.y, 0.0).normalize();
+        let n = facet_normal(model, &cal.model.toward_cameras(), &target)?;
         let up = Vector3::z();
         let a = up.cross(&n);
         // The model maps tool positions to the reference point's images, so a scene point P
         // reconstructs as P − (reference − tool) at the calibration's yaw.
         let yaw_now = f64::from(c.robot.tool_yaw_rad);
         let cal_lever = tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw_now));
-        let facet_centre = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
+        let facet_origin = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
         // A planned grasp site (thesis §6.3.4: "expressed in a coordinate system based on the
-        // target facet"): where the target trackers now put it, reconstructed; the servo's
-        // goal moves along the facet by its horizontal offset from the facet's centre.
-        let along_m = match target_spec.site_template {
-            Some(st) => {
-                let at = |view, k: usize| {
-                    m.trackers.get(Role::Target, view).map(|t| t.image_from_template(nalgebra::Vector2::new(st[k][0], st[k][1])))
-                };
-                let (Some(l), Some(r)) = (at(View::Left, 0), at(View::Right, 1)) else { return Err("servo: no target trackers".into()) };
-                let site = model.reconstruct(&StereoPoint { left: [l.x, l.y], right: [r.x, r.y] }) - cal_lever;
-                a.dot(&(site - facet_centre))
-            }
+        // target facet"): the goal moves along the facet by the site's offset from the facet
+        // origin, measured again through the local model once it is fitted.
+        let site_template = target_spec.site_template;
+        let along_m = match site_template {
+            Some(st) => site_along_m(m, model, &st, &a)?,
             None => 0.0,
         };
         // Thesis §6.3.4: make the plate coplanar with the facet (zero parallax: insensitive to
@@ -180,11 +259,11 @@ impl ServoPhase {
         // robot's own kinematics make exact.
         let tool_z = m.cfg.grasp.table_z_m + s.grasp_height_m + s.standoff_above_m;
         let t = m.cfg.gripper.tool_from_reference_m;
-        // Reference point relative to the facet centre: in the facet plane, straight above.
-        let offset_m = up * (tool_z - facet_centre.z - t[1]) + a * (along_m - t[0]);
+        // Reference point relative to the facet origin: in the facet plane, straight above
+        // the planned site (the origin when there is none).
+        let offset_m = up * (tool_z - facet_origin.z - t[1]) + a * (along_m - t[0]);
         let tool_rel = offset_m + a * t[0] + up * t[1] + n * t[2];
-        let goal = goal_for(model, &cal.model.m, m, &offset_m, &a)?;
-        let tool_goal = facet_centre + tool_rel;
+        let tool_goal = facet_origin + tool_rel;
         let n0 = m.cfg.gripper.normal_at_zero_yaw;
         let yaw_goal = yaw_now + wrap(n.y.atan2(n.x) - n0[1].atan2(n0[0]) - yaw_now);
         m.servo_trace.clear();
@@ -192,19 +271,24 @@ impl ServoPhase {
         m.snapshot = Some("servo_start");
         m.set_status("servo: coarse approach from the reconstruction");
         tracing::info!(?offset_m, along_m, ?tool_goal, yaw_goal, "servo plan");
+        let mut target_recent = TargetMean::default();
+        target_recent.add(&target);
         Ok(Self {
             start_frame: c.frame_index,
             stage: Stage::Approach,
             wait: None,
             servo,
             config,
-            goal,
+            goal: facet_goal(m, &offset_m, &a),
             offset_m,
-            plate_a: a,
+            target_recent,
+            target_cage: TargetMean::default(),
             approach_pose: ([tool_goal.x, tool_goal.y, tool_goal.z], yaw_goal),
             local_robot_m: Vec::with_capacity(LOCAL_CAGE.len()),
             local_image_px: Vec::with_capacity(LOCAL_CAGE.len()),
             acc: [0.0; 7],
+            site_template,
+            depth_m,
             approach_m: (n * (-t[2] - depth_m / 2.0)).into(),
         })
     }
@@ -212,6 +296,13 @@ impl ServoPhase {
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.timeout_s) {
             return Step::Fail(format!("servo: not converged after {} s ({} steps)", m.cfg.servo.timeout_s, m.servo_steps));
+        }
+        // Every frame adds to the target's running means (it stands still; the arm moves).
+        if let Ok((target, _)) = views(m) {
+            self.target_recent.add(&target);
+            if matches!(self.stage, Stage::LocalCage { .. }) {
+                self.target_cage.add(&target);
+            }
         }
         if let Some(w) = self.wait.as_mut() {
             match w.poll(c, m.cfg.servo.settle_frames) {
@@ -226,6 +317,7 @@ impl ServoPhase {
                 self.wait = Some(MoveWait::new(c.seq, c.frame_index));
                 let (p, yaw) = self.approach_pose;
                 self.stage = if m.cfg.servo.local_cage_m > 0.0 {
+                    self.target_cage = TargetMean::default();
                     Stage::LocalCage { i: 0, n: 0 }
                 } else {
                     m.set_status("servo: aligning the plate with the facet");
@@ -246,11 +338,23 @@ impl ServoPhase {
     /// Picks up again after the arm was stopped for a re-acquisition: the pending move is
     /// void (the arm stopped where it was), the servo starts afresh from a new look.
     /// `shift_px` is how far the moved camera's image went: its affine model's offset moves
-    /// with it (the first-order effect of a small knock), and the goal is recomputed with the
-    /// corrected model and the re-acquired target.
+    /// with it (the first-order effect of a small knock). The goal, held in the facet's
+    /// frame, needs nothing: it is turned into image terms from the re-acquired target.
+    ///
+    /// A knock before the local model was fitted (during the approach or the local cage)
+    /// voids the cage's samples so far: the cage starts again from the approach pose and
+    /// fits the local model to the moved camera as it is now.
     pub fn resume(&mut self, m: &mut Mission, view: View, shift_px: [f64; 2]) {
         self.wait = None;
-        self.stage = Stage::Servo { converging: false };
+        self.target_recent = TargetMean::default();
+        self.stage = if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
+            self.local_robot_m.clear();
+            self.local_image_px.clear();
+            self.target_cage = TargetMean::default();
+            Stage::Approach
+        } else {
+            Stage::Servo { converging: false }
+        };
         let rows = if view == View::Left { [0, 1] } else { [2, 3] };
         if let Some(cal) = m.calibration.as_mut() {
             cal.model.c[rows[0]] += shift_px[0];
@@ -259,14 +363,11 @@ impl ServoPhase {
                 cal.servo_model = model;
             }
         }
-        if let Some(cal) = m.calibration.clone()
-            && let Ok(goal) = goal_for(&cal.servo_model, &cal.model.m, m, &self.offset_m, &self.plate_a)
-            && let Ok(servo) = CoplanarityServo::new(cal.servo_model, self.config)
-        {
-            self.goal = goal;
-            self.servo = servo;
-        } else {
-            self.servo.reset();
+        // The model in use (the local one, when there is one) moves with the image too.
+        let model = self.servo.model().shifted(view == View::Left, shift_px);
+        match CoplanarityServo::new(model, self.config) {
+            Ok(servo) => self.servo = servo,
+            Err(_) => self.servo.reset(),
         }
         m.set_status("servo: resumed after re-acquiring");
     }
@@ -310,15 +411,33 @@ impl ServoPhase {
         if local.0.residual_rms_px > m.cfg.calibration.max_residual_px {
             return Step::Fail(format!("servo: local cage residual {:.2} px RMS is too large", local.0.residual_rms_px));
         }
-        self.goal = match goal_for(&local.1, &local.0.m, m, &self.offset_m, &self.plate_a) {
-            Ok(g) => g,
+        // The facet's orientation again, through the local model and from the target frames
+        // averaged over the whole visit: the plate's marks are placed along it.
+        let Some(target) = self.target_cage.mean().or_else(|| self.target_recent.mean()) else {
+            return Step::Fail("servo: no target frames during the local cage".into());
+        };
+        let toward = m.calibration.as_ref().map(|cal| cal.model.toward_cameras()).unwrap_or_else(|| local.0.toward_cameras());
+        let n = match facet_normal(&local.1, &toward, &target) {
+            Ok(n) => n,
             Err(e) => return Step::Fail(e),
         };
+        let a = Vector3::z().cross(&n);
+        // The offset along the facet follows the new axis (and the planned site's distance
+        // along it, through the local model); its height stays.
+        if let Some(st) = self.site_template {
+            let along_m = match site_along_m(m, &local.1, &st, &a) {
+                Ok(x) => x,
+                Err(e) => return Step::Fail(e),
+            };
+            let t0 = m.cfg.gripper.tool_from_reference_m[0];
+            self.offset_m = Vector3::z() * self.offset_m.z + a * (along_m - t0);
+        }
+        self.goal = facet_goal(m, &self.offset_m, &a);
         self.servo = match CoplanarityServo::new(local.1, self.config) {
             Ok(s) => s,
             Err(e) => return Step::Fail(format!("servo: {e}")),
         };
-        tracing::info!(residual_px = local.0.residual_rms_px, goal = ?self.goal, "local model");
+        tracing::info!(residual_px = local.0.residual_rms_px, frames = self.target_cage.n, ?n, "local model");
         self.stage = Stage::Servo { converging: false };
         self.wait = Some(MoveWait::new(c.seq, c.frame_index));
         m.set_status("servo: aligning the plate with the facet");
@@ -327,17 +446,42 @@ impl ServoPhase {
     }
 
     fn look_and_move(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        let (target, gripper) = match views(m) {
+        let (now, gripper) = match views(m) {
             Ok(v) => v,
             Err(e) => return Step::Fail(e),
         };
-        let step = self.servo.step(&target, &gripper, &self.goal);
+        // The target as seen over the frames since the last step (it stood still), and the
+        // goal turned into image terms with that same view of it.
+        let target = self.target_recent.mean().unwrap_or(now);
+        self.target_recent = TargetMean::default();
+        // The goal's height comes from the robot's kinematics (see `image_goal_at_height`).
+        let above_goal_m = f64::from(c.robot.tool_pos_m[2]) - self.approach_pose.0[2];
+        let goal = match self.goal.image_goal_at_height(self.servo.model(), &target, &gripper.reference, above_goal_m) {
+            Ok(g) => g,
+            Err(e) => return Step::Fail(format!("servo: goal: {e}")),
+        };
+        if tracing::enabled!(tracing::Level::TRACE) {
+            let corners = |role, view| m.trackers.get(role, view).map(|t| t.corners().map(|p| [p.x, p.y]).collect::<Vec<_>>());
+            tracing::trace!(frame = c.frame_index, target_l = ?corners(Role::Target, View::Left), target_r = ?corners(Role::Target, View::Right), plate_l = ?corners(Role::Gripper, View::Left), plate_r = ?corners(Role::Gripper, View::Right), "servo corners");
+        }
+        let step = self.servo.step(&target, &gripper, &goal);
         m.servo_steps = step.step;
         if let Some(meas) = step.measurement {
             for (dst, src) in m.servo_error.iter_mut().zip(meas.error.iter()) {
                 *dst = *src;
             }
-            tracing::debug!(step = step.step, error = ?meas.error, across = ?meas.parallax.map(|p| p.across_px), "servo step");
+            tracing::debug!(
+                step = step.step,
+                frame = c.frame_index,
+                error = ?meas.error.as_slice(),
+                across = ?meas.parallax.map(|p| p.across_px),
+                offset_m = ?step.offset.translation_m.as_slice(),
+                offset_yaw_deg = step.offset.yaw_rad.to_degrees(),
+                condition = step.condition,
+                tool_m = ?c.robot.tool_pos_m,
+                tool_yaw_deg = f64::from(c.robot.tool_yaw_rad).to_degrees(),
+                "servo step"
+            );
         }
         if m.servo_trace.len() < m.servo_trace.capacity() {
             m.servo_trace.push(ServoTraceRow {
@@ -358,6 +502,10 @@ impl ServoPhase {
             StepOutcome::Move | StepOutcome::Converged => {
                 if step.outcome == StepOutcome::Converged {
                     self.stage = Stage::Servo { converging: true };
+                    // Coplanar now: the plate's normal is the best estimate of the facet's,
+                    // and the open-loop approach goes along it.
+                    let n = plate_normal(m, f64::from(c.robot.tool_yaw_rad) + step.motion.yaw_rad);
+                    self.approach_m = (n * (-m.cfg.gripper.tool_from_reference_m[2] - self.depth_m / 2.0)).into();
                 }
                 let cmd = self.tool_move(m, c, &step.motion);
                 self.wait = Some(MoveWait::new(c.seq, c.frame_index));
@@ -374,5 +522,34 @@ impl ServoPhase {
         let turned = Vector3::new(co * lever.x - s * lever.y, s * lever.x + co * lever.y, lever.z);
         let d = motion.translation_m + (turned - lever);
         Cmd::move_by([d.x, d.y, d.z], motion.yaw_rad, m.cfg.servo.speed_mps)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::servo::AffineFrame;
+
+    fn frame(dx: f64) -> StereoFrame {
+        let f = |o: [f64; 2]| AffineFrame { o: [o[0] + dx, o[1]], e1: [30.0, 2.0], e2: [-3.0, 40.0] };
+        StereoFrame { left: f([300.0, 400.0]), right: f([280.0, 410.0]) }
+    }
+
+    #[test]
+    fn target_mean_averages_jitter_and_restarts_after_a_jump() {
+        let mut mean = TargetMean::default();
+        assert!(mean.mean().is_none());
+        for dx in [0.4, -0.4, 0.2, -0.2] {
+            mean.add(&frame(dx));
+        }
+        let m = mean.mean().unwrap();
+        assert!((m.left.o[0] - 300.0).abs() < 1e-12 && (m.right.e2[1] - 40.0).abs() < 1e-12, "{m:?}");
+        // Not-finite frames are skipped.
+        mean.add(&frame(f64::NAN));
+        assert_eq!(mean.n, 4);
+        // The target moved 5 px: the old frames no longer describe it.
+        mean.add(&frame(5.0));
+        assert_eq!(mean.n, 1);
+        assert!((mean.mean().unwrap().left.o[0] - 305.0).abs() < 1e-12);
     }
 }

@@ -63,6 +63,19 @@ pub struct TrackerArgs {
     #[arg(long, value_name = "N", default_value_t = 2)]
     passes: usize,
 
+    /// Search only every N-th point of each side in the first (wide) pass (1..=8; default 1:
+    /// all). 2 is about a fifth faster but locks on to wrong edges of the real top face far
+    /// more often (see `TrackerConfig::coarse_stride`): for measuring the trade-off only.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    coarse_stride: usize,
+
+    /// Search the short range around the prediction first and skip the wide pass when that
+    /// moves no corner this far, px (0 = never, the default). 1 px halves the time but loses
+    /// the real top face or strays >= 4 px about four times as often (see
+    /// `TrackerConfig::short_first_px`): for measuring the trade-off only.
+    #[arg(long, value_name = "PX", default_value_t = 0.0)]
+    short_first_px: f64,
+
     /// Print one JSON object: contour_update_us_p50, contour_update_us_p99,
     /// stereo_update_us_p50, stereo_update_us_p99, stereo_hz and the run's details (the
     /// minima are the least disturbed by other load on the machine).
@@ -83,8 +96,14 @@ pub fn run(args: TrackerArgs) -> Result<()> {
         bail!("{} holds {} frames; the benchmark needs at least 3", args.dir.display(), paths.len());
     }
     let frames: Vec<ImageBuf> = paths.iter().map(|p| load_gray(p)).collect::<Result<_>>()?;
-    let config = TrackerConfig { refine_skip_px: args.refine_skip_px, passes: args.passes, ..TrackerConfig::default() };
-    config.validate().context("bad --refine-skip-px or --passes")?;
+    let config = TrackerConfig {
+        refine_skip_px: args.refine_skip_px,
+        passes: args.passes,
+        coarse_stride: args.coarse_stride,
+        short_first_px: args.short_first_px,
+        ..TrackerConfig::default()
+    };
+    config.validate().context("bad --refine-skip-px, --passes, --coarse-stride or --short-first-px")?;
     let dt_s = 1.0 / 30.0;
 
     // One contour through the sequence.
@@ -155,6 +174,8 @@ pub fn run(args: TrackerArgs) -> Result<()> {
             "contour_update_us_min": round3(cmin),
             "stereo_update_us_min": round3(smin),
             "refine_skip_px": config.refine_skip_px,
+            "coarse_stride": config.coarse_stride,
+            "short_first_px": config.short_first_px,
             "ns_per_point_stereo_p50": round3(s50 * 1e3 / (4 * points) as f64),
             "points": points,
             "search_px": config.search_px,

@@ -39,11 +39,14 @@ pub struct FacetConfig {
     pub bridge_max_edges: usize,
     /// Weight of the epipolar rows when refitting a facet's transfer.
     pub epipolar_weight: f64,
+    /// Weight of the junction points between members (seen in both views) when refitting a
+    /// facet's transfer, relative to the line rows (0: lines only).
+    pub junction_weight: f64,
 }
 
 impl Default for FacetConfig {
     fn default() -> Self {
-        Self { min_segments: 3, min_area_px: 60.0, touch_px: 3.0, bridge_max_edges: 6, epipolar_weight: 0.1 }
+        Self { min_segments: 3, min_area_px: 60.0, touch_px: 3.0, bridge_max_edges: 6, epipolar_weight: 0.1, junction_weight: 1.0 }
     }
 }
 
@@ -246,6 +249,9 @@ fn extended_ends(inp: &FacetInput, t: &Transfer, m: u32, slot: &[usize], members
     e
 }
 
+/// The facet's own transfer: its members' lines, the (weak) epipolar rows, and the junction
+/// points between members seen in both views, which pin the disparity where the lines cannot
+/// (edges that run along the epipolar lines fit any disparity).
 fn refit(inp: &FacetInput, members: &[u32], cfg: &FacetConfig) -> Option<Transfer> {
     let first = inp.cands.list[*members.first()? as usize].left as usize;
     let mut fit = TransferFit::new(inp.left[first].midpoint());
@@ -255,6 +261,11 @@ fn refit(inp: &FacetInput, members: &[u32], cfg: &FacetConfig) -> Option<Transfe
         fit.add_line(l, r, 1.0);
         for p in [l.p0, l.p1] {
             fit.add_epipolar(inp.epipolar, p, cfg.epipolar_weight);
+        }
+    }
+    if cfg.junction_weight > 0.0 {
+        for f in inp.friends.iter().filter(|f| members.contains(&f.a) && members.contains(&f.b)) {
+            fit.add_point(f.left_point, f.right_point, cfg.junction_weight);
         }
     }
     fit.solve().filter(|t| t.det() > 0.0)

@@ -229,8 +229,10 @@ impl Planner {
                 confident_junctions(&friends, &planes)
             };
             let Some((refined, mut report)) = refine_epipolar(&geo_used, &pts) else { break };
-            // Re-match only when the constraint was noticeably off.
-            if report.rms_before_px > 0.5 && report.rms_after_px < report.rms_before_px * 0.7 {
+            // Re-match only when the constraint was noticeably off: more than half a pixel, and
+            // the refit explains the junctions by a fifth better (the visp-cube pair's eye-
+            // annotated constraint, 1.26 px, refits to 0.94 px).
+            if report.rms_before_px > 0.5 && report.rms_after_px < report.rms_before_px * 0.8 {
                 geo_used = refined;
                 let (c, f) = match_views(&ls, &rs, &rl, &rr, &geo_used, &cfg);
                 cands = c;

@@ -42,6 +42,9 @@ pub use super::transfer::{coverage, line_residuals, stretches_overlap, Transfer,
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlaneConfig {
     /// Largest distance of a transferred left end from the right segment's line, pixels.
+    /// The true transfer of a face puts its edges' segments within ~0.7 px (sub-pixel edges,
+    /// and a face's perspective bending of the affine transfer at ~1.6 m); much more lets a
+    /// transfer straddle two faces where their parallax differs little (the visp-cube pair).
     pub line_tol_px: f64,
     /// Weight of the (weak) epipolar rows relative to the line rows.
     pub epipolar_weight: f64,
@@ -70,7 +73,7 @@ pub struct PlaneConfig {
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { line_tol_px: 1.2, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0, min_anchor_spread_px: 3.0 }
+        Self { line_tol_px: 0.9, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0, min_anchor_spread_px: 3.0 }
     }
 }
 

@@ -22,8 +22,12 @@ pub struct RelationConfig {
     pub junction_gap_px: f64,
     /// The reach is at most this fraction of the shorter segment's length ...
     pub junction_gap_rel: f64,
-    /// ... but never below this, pixels.
+    /// ... but never below this, pixels (three edges meeting at a block's corner round it
+    /// off over ~6 px, also on short edges).
     pub junction_gap_min_px: f64,
+    /// Width of the gradient of a strong edge that swamps a weak one meeting it (see
+    /// `end_reach`), pixels; 0 disables the allowance.
+    pub junction_swamp_sigma_px: f64,
     /// Smallest angle between the two lines of a junction, degrees.
     pub junction_min_angle_deg: f64,
     /// Largest angle between collinear or parallel segments, degrees.
@@ -43,7 +47,8 @@ impl Default for RelationConfig {
         Self {
             junction_gap_px: 8.0,
             junction_gap_rel: 0.2,
-            junction_gap_min_px: 4.0,
+            junction_gap_min_px: 6.0,
+            junction_swamp_sigma_px: 1.5,
             junction_min_angle_deg: 8.0,
             parallel_max_angle_deg: 3.0,
             collinear_max_offset_px: 1.5,
@@ -192,6 +197,26 @@ impl SegmentGrid {
     }
 }
 
+/// Only an edge this many times weaker than the one it meets counts as swamped (texture
+/// strokes of similar strengths meet at all angles; their ends need no extra reach).
+const SWAMP_MIN_RATIO: f64 = 4.0;
+
+/// How far short of a junction point an end of segment `a` may stop, meeting `b` at an angle
+/// whose sine is `sin`, pixels. Two edges meeting at a small angle blur into each other over
+/// a longer stretch near their corner: `base · 0.7 / sin`, up to 2.5x `base`. And an edge much
+/// weaker than the other is swamped by the other's blurred gradient out to where that has
+/// fallen to its own strength, `σ √(2 ln(c_b / c_a))` across the strong edge (`sigma_px`,
+/// ~1.5 px with the detector's smoothing; less `σ`, which the plain allowance covers), which
+/// along `a` is that over `sin` again: a 4-grey-level edge meeting a 50-level one at 25° stops
+/// ~10 px short. Capped at half the weak edge's length.
+fn end_reach(base: f64, sin: f64, a: &Segment, b: &Segment, sigma_px: f64) -> f64 {
+    let ratio = if a.contrast > 0.0 { b.contrast / a.contrast } else { 1.0 };
+    // Beyond the interference that any two edges meeting have (the plain allowance).
+    let swamp = if ratio >= SWAMP_MIN_RATIO { sigma_px * ((2.0 * ratio.ln()).sqrt() - 1.0) } else { 0.0 };
+    let plain = (base * 0.7 / sin).clamp(base, 2.5 * base);
+    plain.max(((base * 0.7 + swamp) / sin).min(2.5 * base + 2.0 * swamp).min(0.5 * a.length()))
+}
+
 /// Finds junctions, collinears and parallels among `segments` of a `width` x `height` view.
 pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &RelationConfig) -> Relations {
     let mut grid = SegmentGrid::build(segments, width, height, cfg.grid_cell_px);
@@ -219,18 +244,20 @@ pub fn find_relations(segments: &[Segment], width: usize, height: usize, cfg: &R
                 }
                 // Short segments (texture) get a proportionally shorter reach.
                 let base = (cfg.junction_gap_rel * a.length().min(b.length())).clamp(cfg.junction_gap_min_px, gap);
-                let gap = (base * 0.7 / sin).clamp(base, 2.5 * base);
+                let (gap_a, gap_b) = (end_reach(base, sin, a, b, cfg.junction_swamp_sigma_px), end_reach(base, sin, b, a, cfg.junction_swamp_sigma_px));
                 let Some((x, s, t)) = geom::intersect_lines(a.p0, da, b.p0, db) else { continue };
                 let s_end = if end == End::P0 { 0.0 } else { a.length() };
-                if (s - s_end).abs() > gap {
+                if (s - s_end).abs() > gap_a {
                     continue;
                 }
                 let lb = b.length();
-                let end_b = if t.abs() <= gap {
+                let end_b = if t.abs() <= gap_b {
                     End::P0
-                } else if (t - lb).abs() <= gap {
+                } else if (t - lb).abs() <= gap_b {
                     End::P1
-                } else if t > 0.0 && t < lb {
+                } else if t > 0.0 && t < lb && (s - s_end).abs() <= end_reach(base, sin, a, a, 0.0) {
+                    // A T: the swamped reach is for corners (an edge running on past the weak
+                    // one's end is texture's outline as often as not).
                     End::Interior
                 } else {
                     continue;
@@ -356,6 +383,26 @@ mod tests {
 
     fn seg(p0: P2, p1: P2) -> Segment {
         Segment { p0, p1, contrast: 10.0, rms_px: 0.1, n_points: 20 }
+    }
+
+    #[test]
+    fn a_weak_edge_swamped_by_a_strong_one_reaches_its_corner() {
+        // A strong edge from (100, 100) down-left, and a 22 px edge leaving the same corner at
+        // 25° to it that the strong edge's blur has cut 10 px short.
+        let (d1, d2) = ([(-65.0f64).to_radians().cos(), (-65.0f64).to_radians().sin()], [(-40.0f64).to_radians().cos(), (-40.0f64).to_radians().sin()]);
+        let strong = Segment { p0: [100.0, 100.0], p1: geom::add([100.0, 100.0], geom::scale(d1, 60.0)), contrast: 50.0, rms_px: 0.1, n_points: 60 };
+        let start = geom::add([100.0, 100.0], geom::scale(d2, 10.0));
+        let weak = Segment { p0: start, p1: geom::add(start, geom::scale(d2, 22.0)), contrast: 4.0, rms_px: 0.2, n_points: 22 };
+        let rel = find_relations(&[strong, weak], 320, 240, &RelationConfig::default());
+        let j = rel.junctions.first().unwrap_or_else(|| panic!("no junction: {:?}", rel.junctions));
+        assert_eq!(j.kind, JunctionKind::L);
+        assert!(geom::dist(j.point, [100.0, 100.0]) < 1e-6, "{:?}", j.point);
+        // As strong as each other, the same gap is no junction (texture strokes that merely
+        // point at each other), and without the allowance neither is the weak one's.
+        let even = Segment { contrast: 50.0, ..weak };
+        assert!(find_relations(&[strong, even], 320, 240, &RelationConfig::default()).junctions.is_empty());
+        let off = RelationConfig { junction_swamp_sigma_px: 0.0, ..RelationConfig::default() };
+        assert!(find_relations(&[strong, weak], 320, 240, &off).junctions.is_empty());
     }
 
     #[test]

@@ -59,6 +59,16 @@ impl ServoModel {
         Ok(self)
     }
 
+    /// The same model with one view's image moved by `shift_px` (the first-order effect of a
+    /// small knock of that camera): its offset moves, nothing else changes.
+    pub fn shifted(&self, left: bool, shift_px: [f64; 2]) -> Self {
+        let mut m = *self;
+        let k = if left { 0 } else { 2 };
+        m.c[k] += shift_px[0];
+        m.c[k + 1] += shift_px[1];
+        m
+    }
+
     /// Unit direction of the right image's epipolar lines; the sign of every parallax.
     pub fn epipolar_right(&self) -> Vector2<f64> {
         self.epipolar_right
@@ -72,6 +82,12 @@ impl ServoModel {
     /// Affine reconstruction of an image displacement pair (a direction), robot frame.
     pub fn reconstruct_direction(&self, d: &StereoPoint) -> Vector3<f64> {
         self.pinv * Vector4::new(d.left[0], d.left[1], d.right[0], d.right[1])
+    }
+
+    /// Images of a 3-D direction (or displacement) `d`, robot frame: `M d` in each view.
+    pub fn project_direction(&self, d: &Vector3<f64>) -> StereoPoint {
+        let (l, r) = (self.m_left * d, self.m_right * d);
+        StereoPoint { left: [l[0], l[1]], right: [r[0], r[1]] }
     }
 
     /// `∂π/∂X = ê_rᵀ (M_r − A_T M_l)`: parallax (px) per metre of motion of a point.

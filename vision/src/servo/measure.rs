@@ -19,6 +19,10 @@ pub enum GeometryError {
     /// The gripper axis has (nearly) zero length in one view.
     #[error("the gripper axis in the {view} view has zero length")]
     DegenerateAxis { view: &'static str },
+    /// A goal's horizontal and vertical directions (nearly) coincide in the target's frame
+    /// (the facet is seen edge-on, or lies flat), so its height cannot be set apart.
+    #[error("the goal's horizontal and vertical directions look alike in the target's frame (facet edge-on or flat)")]
+    DegenerateGoal,
 }
 
 /// Smallest `|det [e1 e2]|` of a usable frame, px². A tracker frame is tens of pixels on a
@@ -203,9 +207,15 @@ pub fn measure(
             + target.left.basis().column(1).norm()
             + target.right.basis().column(0).norm()
             + target.right.basis().column(1).norm());
-    // An angle times the axis's image length is the displacement (px) of the axis's far
-    // end: comparable with a parallax, and with about the same noise.
-    let axis_px = 0.5 * (v2(&gripper.axis.left).norm() + v2(&gripper.axis.right).norm());
+    // An angle times the marks' distance from the reference point is the displacement (px)
+    // of a mark: comparable with a parallax, and with about the same noise. (Not the axis's
+    // image length: the axis is a direction, its length an arbitrary unit, e.g. per metre.)
+    let lever_px = gripper
+        .marks
+        .iter()
+        .map(|m| 0.5 * ((v2(&m.left) - v2(&gripper.reference.left)).norm() + (v2(&m.right) - v2(&gripper.reference.right)).norm()))
+        .sum::<f64>()
+        / 3.0;
 
     let error = Vector6::new(
         parallax[0].along_px - goal.parallax_px[0],
@@ -220,6 +230,6 @@ pub fn measure(
         parallax,
         st: st.into(),
         angle_rad,
-        row_weights: Vector6::new(1.0, 1.0, 1.0, basis_px, basis_px, axis_px.max(1.0)),
+        row_weights: Vector6::new(1.0, 1.0, 1.0, basis_px, basis_px, lever_px.max(1.0)),
     })
 }

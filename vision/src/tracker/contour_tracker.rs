@@ -7,7 +7,8 @@ use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{AffineFrame, Placement};
-use super::search::{search_side, Appearance, Candidate, PointEdges, SideGeometry, SideScratch, SignRule};
+use super::batch::{ContourSearch, SearchSettings};
+use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
 use crate::image::ImageView;
 
@@ -85,8 +86,24 @@ pub struct ContourTracker {
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
     fit: FitBuffers,
-    /// Working space of the search of one side.
-    line: SideScratch,
+    /// `ref_contrast`, `ref_inside` and `side_of` of a subset pass's points, in its order.
+    subset_contrast: Vec<f32>,
+    subset_inside: Vec<f32>,
+    subset_side: Vec<u16>,
+    /// Side index of each point.
+    side_of: Vec<u16>,
+    /// The search of all the points' normals.
+    lines: ContourSearch,
+}
+
+/// Every `stride`-th of a side's `count` points, centred on the side: the first one's index
+/// and how many.
+fn subset(count: usize, stride: usize) -> (usize, usize) {
+    if count == 0 {
+        return (0, 0);
+    }
+    let offset = (count - 1) % stride / 2;
+    (offset, (count - 1 - offset) / stride + 1)
 }
 
 impl ContourTracker {
@@ -140,7 +157,11 @@ impl ContourTracker {
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
-            line: SideScratch::with_capacity(n),
+            side_of: Vec::with_capacity(n),
+            subset_contrast: vec![0.0; n],
+            subset_inside: vec![-1.0; n],
+            subset_side: vec![0; n],
+            lines: ContourSearch::new(),
         };
         tracker.restart(frame);
         tracker
@@ -168,6 +189,11 @@ impl ContourTracker {
         self.ref_inside.clear();
         self.ref_inside.resize(n, -1.0);
         self.fit.resize(n);
+        self.side_of.clear();
+        self.side_of.resize(n, 0);
+        for (s, edge) in self.template.edges.iter().enumerate() {
+            self.side_of[edge.first..edge.first + edge.count].fill(s as u16);
+        }
     }
 
     /// Re-initialises from a new polygon (image pixels): a new template, fresh state. Does not
@@ -197,35 +223,37 @@ impl ContourTracker {
         let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
         let predicted = self.filter.predict(&self.placement, dt_s);
         let mut current = predicted;
-        for pass in 0..self.config.passes {
-            let search_px = if pass == 0 { self.config.search_px } else { self.config.refine_search_px };
-            self.search(image, &current, search_px);
-            let settings = FitSettings {
-                model: self.config.model,
-                loss: self.config.loss,
-                iterations: if pass == 0 { self.config.iterations } else { self.config.refine_iterations },
-                sigma_min_px: self.config.sigma_min_px,
-                sigma_max_px: self.config.sigma_max_px.min(search_px),
-                deformation_ridge: self.config.deformation_ridge,
-                perspective_ridge: self.config.perspective_ridge,
+        // Optionally a short search around the prediction first, kept when it barely moves
+        // the contour (see `TrackerConfig::short_first_px`).
+        let mut settled = false;
+        if self.config.short_first_px > 0.0 && self.updates > 0 {
+            let (search_px, iterations) = (self.config.refine_search_px, self.config.refine_iterations);
+            if let Some((moved, moved_px)) = self.pass(image, &current, search_px, 1, iterations)
+                && moved_px < self.config.short_first_px
+            {
+                (current, settled) = (moved, true);
+            }
+        }
+        let passes = if settled { 0 } else { self.config.passes };
+        for pass in 0..passes {
+            let (search_px, iterations) = if pass == 0 {
+                (self.config.search_px, self.config.iterations)
+            } else {
+                (self.config.refine_search_px, self.config.refine_iterations)
             };
-            let points = FitPoints { px: &self.rel_x, py: &self.rel_y, sides: &self.fit_sides };
-            let fit = fit_motion(&points, &settings, &mut self.fit);
-            let Some(moved) = current.moved(fit.t, fit.a, fit.g, current.frame.origin) else {
+            // The first of several passes only has to find where the contour went within the
+            // wide range: with `coarse_stride` > 1 a subset of the points does that (the last
+            // pass always searches them all).
+            let stride = if pass == 0 && passes > 1 { self.config.coarse_stride } else { 1 };
+            let Some((moved, moved_px)) = self.pass(image, &current, search_px, stride, iterations) else {
                 self.state = TrackState::Lost(LostReason::NotFinite);
                 self.updates += 1;
                 return self.state;
             };
-            // A pass that barely moved any corner would be searched again at the same places:
-            // skip the remaining passes.
-            let moved_px = self
-                .template
-                .corners()
-                .iter()
-                .map(|c| (moved.image_from_template(*c) - current.image_from_template(*c)).norm())
-                .fold(0.0, f64::max);
             current = moved;
-            if moved_px < self.config.refine_skip_px {
+            // A pass that barely moved any corner would be searched again at the same places:
+            // skip the remaining passes (not after a subset: the checks need every point).
+            if stride == 1 && moved_px < self.config.refine_skip_px {
                 break;
             }
         }
@@ -249,14 +277,54 @@ impl ContourTracker {
         self.state
     }
 
-    /// Places the points for `placement` and searches every normal.
-    fn search(&mut self, image: &ImageView<'_>, placement: &Placement, search_px: f64) {
+    /// One search and fit from `placement`: the moved placement and how far it moved the
+    /// farthest corner, px (`None` when the fit is not finite).
+    fn pass(
+        &mut self,
+        image: &ImageView<'_>,
+        placement: &Placement,
+        search_px: f64,
+        stride: usize,
+        iterations: usize,
+    ) -> Option<(Placement, f64)> {
+        let searched = self.search(image, placement, search_px, stride);
+        let settings = FitSettings {
+            model: self.config.model,
+            loss: self.config.loss,
+            iterations,
+            sigma_min_px: self.config.sigma_min_px,
+            sigma_max_px: self.config.sigma_max_px.min(search_px),
+            deformation_ridge: self.config.deformation_ridge,
+            perspective_ridge: self.config.perspective_ridge,
+        };
+        let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
+        let fit = fit_motion(&points, &settings, &mut self.fit);
+        let moved = placement.moved(fit.t, fit.a, fit.g, placement.frame.origin)?;
+        let moved_px = self
+            .template
+            .corners()
+            .iter()
+            .map(|c| (moved.image_from_template(*c) - placement.image_from_template(*c)).norm())
+            .fold(0.0, f64::max);
+        Some((moved, moved_px))
+    }
+
+    /// Places the points for `placement` and searches their normals: every point, or with
+    /// `stride` > 1 every `stride`-th point of each side (centred on the side). The searched
+    /// points are stored in order from index 0 (with `stride` 1, point `i` at `i`); returns
+    /// their number.
+    fn search(&mut self, image: &ImageView<'_>, placement: &Placement, search_px: f64, stride: usize) -> usize {
         let frame = &placement.frame;
         let orient = self.template.orientation * frame.det().signum();
+        let stride = stride.max(1);
         self.sides.clear();
         self.fit_sides.clear();
-        let min_contrast = self.config.min_contrast;
-        for edge in &self.template.edges {
+        let searched: usize = self.template.edges.iter().map(|e| subset(e.count, stride).1).sum();
+        if searched != self.fit.len() {
+            self.fit.resize(searched);
+        }
+        let mut dst = 0;
+        for (side_index, edge) in self.template.edges.iter().enumerate() {
             // A side stays straight under the placement; its image direction is that of its
             // end points (the tangent pushed through the map's derivative in the affine case).
             let tau = if placement.perspective == Vector2::zeros() {
@@ -272,11 +340,16 @@ impl ContourTracker {
             self.sides.push(side);
             let start = placement.image_from_template(edge.start) - frame.origin;
             let np = normal[0] * start.x + normal[1] * start.y;
-            self.fit_sides.push(FitSide { first: edge.first, count: edge.count, normal: Vector2::new(normal[0], normal[1]), np });
+            // This side's searched points: template points `edge.first + offset + stride · j`,
+            // stored at `dst + j`.
+            let (offset, count) = subset(edge.count, stride);
+            debug_assert!(stride > 1 || dst == edge.first, "a template's sides hold consecutive points");
+            self.fit_sides.push(FitSide { first: dst, count, normal: Vector2::new(normal[0], normal[1]), np });
             let affine = placement.perspective == Vector2::zeros();
-            let first = frame.image_from_template(edge.start);
-            let step = frame.e1 * edge.step.x + frame.e2 * edge.step.y;
-            let range = edge.first..edge.first + edge.count;
+            let (t_start, t_step) = (edge.start + edge.step * offset as f64, edge.step * stride as f64);
+            let first = frame.image_from_template(t_start);
+            let step = frame.e1 * t_step.x + frame.e2 * t_step.y;
+            let range = dst..dst + count;
             // The side's points...
             let points = self.pos_x[range.clone()]
                 .iter_mut()
@@ -286,34 +359,52 @@ impl ContourTracker {
                 let p = if affine {
                     first + step * k as f64
                 } else {
-                    placement.image_from_template(edge.start + edge.step * k as f64)
+                    placement.image_from_template(t_start + t_step * k as f64)
                 };
                 (*pos_x, *pos_y) = (p.x, p.y);
                 (*rel_x, *rel_y) = (p.x - frame.origin.x, p.y - frame.origin.y);
             }
-            // ...their searches (with the appearance cue)...
-            let signs = match self.config.edge_sign {
-                EdgeSign::Either => SignRule::Fixed(0),
-                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
-                EdgeSign::Learned => {
-                    SignRule::Learned { reference: &self.ref_contrast[range.clone()], min_contrast: min_contrast as f32 }
+            // ...what they have learnt, next to each other for a subset...
+            if stride > 1 {
+                for j in 0..count {
+                    let i = edge.first + offset + stride * j;
+                    self.subset_contrast[dst + j] = self.ref_contrast[i];
+                    self.subset_inside[dst + j] = self.ref_inside[i];
+                    self.subset_side[dst + j] = side_index as u16;
                 }
-            };
-            let appearance = Appearance {
-                reference: &self.ref_inside[range.clone()],
-                gain: self.config.appearance_px_per_grey as f32,
-                tolerance: self.config.appearance_tolerance as f32,
-            };
-            let (xs, ys) = (&self.pos_x[range.clone()], &self.pos_y[range.clone()]);
-            let found = &mut self.edges[range.clone()];
-            search_side(image, &side, xs, ys, search_px, signs, appearance, min_contrast, &mut self.line, found);
+            }
             // ...and the fit's copy.
             self.nrm_x[range.clone()].fill(normal[0]);
             self.nrm_y[range.clone()].fill(normal[1]);
             let geometry = (normal[0] as f32, normal[1] as f32, np as f32);
-            self.fit.set_side(edge.first, &self.rel_x[range.clone()], &self.rel_y[range.clone()], geometry);
-            self.fit.set_side_candidates(edge.first, &self.edges[range]);
+            self.fit.set_side(dst, &self.rel_x[range.clone()], &self.rel_y[range], geometry);
+            dst += count;
         }
+        // The searches of all of them (with the appearance cue).
+        let (ref_contrast, ref_inside, side_of) = if stride == 1 {
+            (&self.ref_contrast[..searched], &self.ref_inside[..searched], &self.side_of[..searched])
+        } else {
+            (&self.subset_contrast[..searched], &self.subset_inside[..searched], &self.subset_side[..searched])
+        };
+        let min_contrast = self.config.min_contrast;
+        let settings = SearchSettings {
+            search_px,
+            signs: match self.config.edge_sign {
+                EdgeSign::Either => SignRule::Fixed(0),
+                EdgeSign::Fixed(p) => SignRule::Fixed(p.outward_sign()),
+                EdgeSign::Learned => SignRule::Learned { reference: ref_contrast, min_contrast: min_contrast as f32 },
+            },
+            appearance: Appearance {
+                reference: ref_inside,
+                gain: self.config.appearance_px_per_grey as f32,
+                tolerance: self.config.appearance_tolerance as f32,
+            },
+            min_contrast,
+        };
+        let (xs, ys) = (&self.pos_x[..searched], &self.pos_y[..searched]);
+        let fit = self.fit.candidate_slots();
+        self.lines.search(image, &self.sides, side_of, xs, ys, &settings, &mut self.edges[..searched], Some(fit));
+        searched
     }
 
     /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.

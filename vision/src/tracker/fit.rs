@@ -10,7 +10,7 @@
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
-use super::search::{Candidate, PointEdges, MAX_CANDIDATES};
+use super::search::{Candidate, MAX_CANDIDATES};
 use super::simd::F32x4;
 
 /// Which least-squares problem estimates the shape change (Appendix A).
@@ -105,6 +105,8 @@ pub(crate) struct FitBuffers {
     r: Vec<f32>,
     valid: Vec<f32>,
     w: Vec<f32>,
+    /// The chosen candidate per lane (-1: none), from the final association.
+    chosen_lane: Vec<f32>,
     /// The last fit's motion, robust scale and loss, for [`finish`](Self::finish).
     last: Option<(Vec8, f64, RobustLoss)>,
     /// The residual histogram, kept here: clearing all of it per fit would cost more than
@@ -134,6 +136,7 @@ impl FitBuffers {
             r: Vec::with_capacity(lanes),
             valid: Vec::with_capacity(lanes),
             w: Vec::with_capacity(lanes),
+            chosen_lane: Vec::with_capacity(lanes),
             last: None,
             bins: ResidualBins::default(),
             avx2: has_avx2(),
@@ -147,7 +150,7 @@ impl FitBuffers {
         self.chosen.resize(n, -1);
         self.residual.resize(n, 0.0);
         self.weight.resize(n, 0.0);
-        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.valid, &mut self.w] {
+        for v in [&mut self.x, &mut self.y, &mut self.nx, &mut self.ny, &mut self.c, &mut self.h, &mut self.r, &mut self.valid, &mut self.w, &mut self.chosen_lane] {
             v.resize(lanes, 0.0);
         }
         self.cand_h.resize(lanes * MAX_CANDIDATES, 0.0);
@@ -160,6 +163,11 @@ impl FitBuffers {
         self.last = None;
     }
 
+    /// Points the buffers hold now.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
     /// Asserts the layout the four-lane loops rely on to read without bounds checks: every
     /// working array holds `lanes` values (per candidate slot), a multiple of 4.
     #[inline]
@@ -167,7 +175,7 @@ impl FitBuffers {
         let l = self.lanes;
         assert!(
             l.is_multiple_of(LANES)
-                && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w]
+                && [&self.x, &self.y, &self.nx, &self.ny, &self.c, &self.h, &self.r, &self.valid, &self.w, &self.chosen_lane]
                     .iter()
                     .all(|v| v.len() == l)
                 && self.cand_h.len() == l * MAX_CANDIDATES
@@ -201,24 +209,9 @@ impl FitBuffers {
         self.c[range].fill(c);
     }
 
-    /// The candidate edges of the points `first..first + edges.len()`.
-    pub fn set_side_candidates(&mut self, first: usize, edges: &[PointEdges]) {
-        let (lanes, end) = (self.lanes, first + edges.len());
-        assert!(end <= lanes && self.cand_h.len() == lanes * MAX_CANDIDATES && self.cand_pen.len() == self.cand_h.len());
-        let (cand_h, cand_pen) = (self.cand_h.as_mut_ptr(), self.cand_pen.as_mut_ptr());
-        for (i, e) in (first..end).zip(edges) {
-            let count = e.count as usize;
-            for (k, c) in e.candidates.iter().enumerate() {
-                // Branch-free: whether a slot holds a candidate varies from point to point.
-                let (h, pen) = if k < count { (c.h_px, c.penalty_px) } else { (0.0, f32::INFINITY) };
-                // SAFETY: i < end <= lanes and k < MAX_CANDIDATES, inside both arrays
-                // (asserted above).
-                unsafe {
-                    *cand_h.add(k * lanes + i) = h;
-                    *cand_pen.add(k * lanes + i) = pen;
-                }
-            }
-        }
+    /// Where the search writes the candidates directly: offsets and penalties, slot-major.
+    pub fn candidate_slots(&mut self) -> super::batch::FitSlots<'_> {
+        super::batch::FitSlots { h: &mut self.cand_h, penalty: &mut self.cand_pen, stride: self.lanes }
     }
 
     /// Point `i`'s candidate edges (at most [`MAX_CANDIDATES`]): offsets and penalties.
@@ -238,7 +231,7 @@ impl FitBuffers {
     /// Fills the working copies from a pass's points (the tracker sets them as it searches
     /// instead).
     #[cfg(test)]
-    fn load(&mut self, points: &FitPoints<'_>, edges: &[PointEdges]) {
+    fn load(&mut self, points: &FitPoints<'_>, edges: &[super::search::PointEdges]) {
         self.resize(points.px.len());
         for side in points.sides {
             for i in side.first..side.first + side.count {
@@ -257,9 +250,10 @@ impl FitBuffers {
         let Some((theta, sigma, loss)) = self.last.take() else {
             return;
         };
-        associate_scalar(&theta, self);
+        associate::<false, true>(&theta, self);
         weigh(loss, sigma, self);
         for i in 0..self.n {
+            self.chosen[i] = self.chosen_lane[i] as i8;
             self.residual[i] = self.r[i] as f64;
             self.weight[i] = self.w[i] as f64;
         }
@@ -346,10 +340,10 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
         // 1. Association and residuals under the current motion, with their histogram
         // (the first iteration uses the largest scale whatever the residuals).
         let found = if iter == 0 {
-            associate::<false>(&theta, buf)
+            associate::<false, false>(&theta, buf)
         } else {
             buf.bins.clear(top_bin);
-            associate::<true>(&theta, buf)
+            associate::<true, false>(&theta, buf)
         };
         if found == 0 {
             buf.last = Some((theta, sigma, settings.loss));
@@ -433,11 +427,11 @@ pub(crate) fn fit_motion(points: &FitPoints<'_>, settings: &FitSettings, buf: &m
 /// had one; with `BIN`, bins the absolute residuals of those that did. Returns their number.
 /// Four points at a time, branch-free over the candidate slots.
 #[inline]
-fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+fn associate<const BIN: bool, const CHOSEN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
     #[cfg(target_arch = "x86_64")]
     if buf.avx2 {
         // SAFETY: the processor has AVX2 (checked when the buffers were made).
-        return unsafe { associate_avx2::<BIN>(theta, buf) };
+        return unsafe { associate_avx2::<BIN, CHOSEN>(theta, buf) };
     }
     let th: [F32x4; 8] = std::array::from_fn(|k| F32x4::splat(theta[k] as f32));
     let lanes = buf.lanes;
@@ -445,6 +439,7 @@ fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
     let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
     let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
     let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let chosen_out = buf.chosen_lane.as_mut_ptr();
     let inf = F32x4::splat(f32::INFINITY);
     let scale = F32x4::splat(HIST_PER_PX as f32);
     let top = F32x4::splat(buf.bins.top as f32);
@@ -463,13 +458,19 @@ fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
                 .mul(along_x)
                 .add(F32x4::load_ptr(ny.add(i)).mul(along_y))
                 .sub(F32x4::load_ptr(c.add(i)).mul(perspective));
-            let (mut best, mut best_h) = (inf, F32x4::splat(0.0));
+            let (mut best, mut best_h, mut best_k) = (inf, F32x4::splat(0.0), F32x4::splat(-1.0));
             for k in 0..MAX_CANDIDATES {
                 let hk = F32x4::load_ptr(cand_h.add(k * lanes + i));
                 let cost = hk.sub(pred).abs().add(F32x4::load_ptr(cand_pen.add(k * lanes + i)));
                 let better = cost.lt(best);
                 best = better.select(cost, best);
                 best_h = better.select(hk, best_h);
+                if CHOSEN {
+                    best_k = better.select(F32x4::splat(k as f32), best_k);
+                }
+            }
+            if CHOSEN {
+                best_k.store_ptr(chosen_out.add(i));
             }
             let valid = best.lt(inf);
             let r = best_h.sub(pred);
@@ -499,13 +500,14 @@ fn associate<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
 /// The processor supports AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
+unsafe fn associate_avx2<const BIN: bool, const CHOSEN: bool>(theta: &Vec8, buf: &mut FitBuffers) -> usize {
     use std::arch::x86_64::*;
     let lanes = buf.lanes;
     buf.check_lanes();
     let (x, y, nx, ny, c) = (buf.x.as_ptr(), buf.y.as_ptr(), buf.nx.as_ptr(), buf.ny.as_ptr(), buf.c.as_ptr());
     let (cand_h, cand_pen) = (buf.cand_h.as_ptr(), buf.cand_pen.as_ptr());
     let (h, r_out, valid_out) = (buf.h.as_mut_ptr(), buf.r.as_mut_ptr(), buf.valid.as_mut_ptr());
+    let chosen_out = buf.chosen_lane.as_mut_ptr();
     let top_bin = buf.bins.top;
     let bins = &mut buf.bins.counts;
     let th: [__m256; 8] = std::array::from_fn(|k| _mm256_set1_ps(theta[k] as f32));
@@ -529,7 +531,7 @@ unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) ->
                 ),
                 _mm256_mul_ps(_mm256_loadu_ps(c.add(i)), perspective),
             );
-            let (mut best, mut best_h) = (inf, _mm256_setzero_ps());
+            let (mut best, mut best_h, mut best_k) = (inf, _mm256_setzero_ps(), _mm256_set1_ps(-1.0));
             for k in 0..MAX_CANDIDATES {
                 let hk = _mm256_loadu_ps(cand_h.add(k * lanes + i));
                 let distance = _mm256_andnot_ps(sign_bit, _mm256_sub_ps(hk, pred));
@@ -537,6 +539,12 @@ unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) ->
                 let better = _mm256_cmp_ps::<_CMP_LT_OQ>(cost, best);
                 best = _mm256_blendv_ps(best, cost, better);
                 best_h = _mm256_blendv_ps(best_h, hk, better);
+                if CHOSEN {
+                    best_k = _mm256_blendv_ps(best_k, _mm256_set1_ps(k as f32), better);
+                }
+            }
+            if CHOSEN {
+                _mm256_storeu_ps(chosen_out.add(i), best_k);
             }
             let valid = _mm256_cmp_ps::<_CMP_LT_OQ>(best, inf);
             let r = _mm256_sub_ps(best_h, pred);
@@ -559,8 +567,9 @@ unsafe fn associate_avx2<const BIN: bool>(theta: &Vec8, buf: &mut FitBuffers) ->
     found
 }
 
-/// [`associate`] one point at a time, also recording the chosen candidate's index: the final
-/// association of a fit.
+/// [`associate`] one point at a time, also recording the chosen candidate's index: the
+/// reference the vector paths are tested against.
+#[cfg(test)]
 fn associate_scalar(theta: &Vec8, buf: &mut FitBuffers) {
     let th: [f32; 8] = std::array::from_fn(|k| theta[k] as f32);
     let lanes = buf.lanes;
@@ -869,7 +878,7 @@ fn solve_full_vector(
 
 #[cfg(test)]
 mod tests {
-    use super::super::search::Candidate;
+    use super::super::search::{Candidate, PointEdges};
     use super::*;
 
     /// Points around a 100x60 rectangle centred on the origin, grouped by side.
@@ -1031,7 +1040,7 @@ mod tests {
             let pts = FitPoints { px: &[10.0], py: &[0.0], sides: &[side] };
             buf.load(&pts, edges);
             // The four-lane association and the final one agree.
-            let found = associate::<true>(&Vec8::zeros(), buf);
+            let found = associate::<true, false>(&Vec8::zeros(), buf);
             let (h, r) = (buf.h[0], buf.r[0]);
             associate_scalar(&Vec8::zeros(), buf);
             assert_eq!((h, r), (buf.h[0], buf.r[0]));
@@ -1079,7 +1088,7 @@ mod tests {
             buf.avx2 = avx2 && buf.avx2;
             buf.load(&pts, &edges);
             buf.bins.clear(40);
-            let found = associate::<true>(&theta, &mut buf);
+            let found = associate::<true, false>(&theta, &mut buf);
             (found, buf.h.clone(), buf.r.clone(), buf.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), buf)
         };
         let (found4, h4, r4, valid4, mut buf4) = run(false);
@@ -1091,5 +1100,17 @@ mod tests {
         associate_scalar(&theta, &mut buf4);
         assert_eq!((&buf4.h, &buf4.r), (&h4, &r4));
         assert_eq!(buf4.valid.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), valid4);
+        // The final association's choices too, on both vector paths.
+        let scalar_chosen = buf4.chosen.clone();
+        for avx2 in [false, true] {
+            let mut buf = FitBuffers::with_capacity(n);
+            buf.avx2 = avx2 && buf.avx2;
+            buf.load(&pts, &edges);
+            associate::<false, true>(&theta, &mut buf);
+            let chosen: Vec<i8> = buf.chosen_lane[..n].iter().map(|k| *k as i8).collect();
+            assert_eq!(chosen, scalar_chosen, "avx2 {avx2}");
+            assert_eq!((&buf.h, &buf.r), (&h4, &r4));
+        }
+        assert!(scalar_chosen.iter().any(|k| *k > 0) && scalar_chosen.contains(&-1));
     }
 }

@@ -39,20 +39,25 @@
 //!
 //! Speed (`handeye bench tracker`; `vision/examples/tracker_profile.rs` counts instructions
 //! and checks robustness). About 60 % of the time is the edge search, 25 % the fit:
-//! - A side's points are searched in one call ([`search`]): every line is placed and every
-//!   column window gathered first (its strided loads in one burst, written long before they
-//!   are read back), then each window is scanned sixteen samples at a time (SSE2, part of
-//!   the x86_64 baseline): saturating byte differences give the score, byte comparisons the
-//!   local maxima; the strongest four go through a branch-free max/min network, and their
-//!   sub-pixel steps run in four f32 lanes.
-//! - The fit works on f32 arrays padded to whole lanes, filled as the search goes; the
-//!   association runs four points at a time (eight with AVX2, detected once per tracker),
-//!   the residual histogram is per lane and only as long as the robust scale needs, and the
+//! - The search runs all of a contour's lines at once, sixteen side by side (`batch`): each
+//!   line's samples go into one lane of a table (a memory copy for a line along a row, a
+//!   gather for a column, then a byte transpose), and the differences, scores, peak flags
+//!   and the strongest-four network run table row by table row on sixteen lanes (AVX2 where
+//!   the processor has it, detected once per tracker); per kept peak a few loads from the
+//!   tables, and the sub-pixel steps four at a time. The candidates go straight into the
+//!   fit's arrays.
+//! - The fit works on f32 arrays padded to whole lanes; the association runs four points at
+//!   a time (eight with AVX2), also for the final choice of each point's candidate, the
+//!   residual histogram is per lane and only as long as the robust scale needs, and the
 //!   small solves are written out.
 //! - Every vector path computes exactly what the scalar code does, lane by lane and in the
 //!   same order (tests compare them bit for bit), and a portable fallback serves other
 //!   processors; the tracker's results do not depend on the path taken.
+//! - What does not help: fewer points in the wide pass (`coarse_stride`), a short search
+//!   first (`short_first_px`), one pass, or fewer reweighting iterations all lose the real
+//!   top face markedly more often (numbers at those settings and in `BENCHMARKS.md`).
 
+mod batch;
 mod config;
 mod contour;
 mod contour_tracker;

@@ -83,6 +83,7 @@ impl F32x4 {
     }
 
     /// The lanes of an array.
+    #[cfg(test)]
     #[inline(always)]
     pub fn load_array(v: [f32; 4]) -> Self {
         #[cfg(target_arch = "x86_64")]
@@ -92,6 +93,7 @@ impl F32x4 {
     }
 
     /// Lanes converted from i32 (exact below 2^24).
+    #[cfg(test)]
     #[inline(always)]
     pub fn from_i32(v: [i32; 4]) -> Self {
         #[cfg(target_arch = "x86_64")]

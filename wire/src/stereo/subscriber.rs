@@ -301,22 +301,9 @@ impl StereoSubscriber {
             if now >= deadline {
                 return Ok(StereoEvent::Timeout);
             }
-            let nap = (deadline - now).min(self.liveness.until_due()).max(Duration::from_millis(1));
-            let mut lifecycle = false;
-            match self.listener.timed_wait(|ev| lifecycle |= is_lifecycle_event(ev.id.as_value()), nap) {
-                Ok(_) => {}
-                Err(ListenerWaitError::InterruptSignal) => {
-                    if self.node.termination_requested() {
-                        return Ok(StereoEvent::Interrupted);
-                    }
-                }
-                Err(e) => {
-                    return Err(StereoWaitError::Listener { service: service::STEREO, detail: format!("{e:?}") });
-                }
-            }
-            if lifecycle {
-                self.liveness.force();
-            }
+            self.liveness
+                .nap(&self.listener, deadline)
+                .map_err(|detail| StereoWaitError::Listener { service: service::STEREO, detail })?;
         }
     }
 }
