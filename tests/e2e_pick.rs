@@ -21,7 +21,7 @@ fn assert_picked(r: &RunResult, max_plane_mm: f64, max_angle_deg: f64) {
     assert!(r.f("max_lift_mm") >= 50.0, "{why}");
     // The report: overlays at key moments, the servo plot, both JSONs and both logs.
     let files: Vec<String> = std::fs::read_dir(&r.out.0).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    for want in ["servo_error.png", "daemon.json", "sim.json", "run.json", "hint.json", "daemon.toml", "sim.stderr.log", "daemon.stderr.log"] {
+    for want in ["servo_convergence.svg", "daemon.json", "sim.json", "run.json", "hint.json", "daemon.toml", "sim.stderr.log", "daemon.stderr.log"] {
         assert!(files.iter().any(|f| f == want), "{want} missing from the report: {files:?}");
     }
     for moment in ["gripper_acquired", "calibrated", "servo_converged", "grasped", "lifted"] {

@@ -67,19 +67,27 @@ fn clutter3_plans_its_own_grasp_and_lifts_the_block_nearest_the_indicated_point(
     assert_eq!(r.sim["daemon"]["targeted"]["block"], "lblock", "{why}");
     assert_eq!(r.sim["daemon"]["targeted"]["is_task_target"], true, "{why}");
     assert!(r.f("max_lift_mm") >= 50.0, "{why}");
-    // Tracking while planning, as the simulator saw the telemetry: one gripper update per
-    // frame the planner worked.
+    // Tracking while planning, as the simulator saw the telemetry (`planning` = 1 while
+    // `tracker_updates` rises): one gripper update per frame the planner worked, so the
+    // update rate over the planning window (simulated time) is the camera frame rate; a
+    // tracker frozen while the planner works would show 0 (the bound is half the rate).
     let w = &r.sim["daemon"]["plan"];
     let frames = w["planning_frames"].as_u64().unwrap();
-    assert!(frames >= 2, "{w}");
+    assert!(frames >= 3, "the planner outlasted only {frames} frames: too short a window to show a rate: {w}");
     assert_eq!(w["max_update_step"], 1, "{w}");
     assert_eq!(w["gripper_updates_while_planning"], serde_json::json!([frames - 1, frames - 1]), "{w}");
+    let fps = w["frame_rate_hz"].as_f64().unwrap();
+    let window_s = w["planning_window_s"].as_f64().unwrap();
+    assert!((window_s - (frames - 1) as f64 / fps).abs() < 1e-9, "{w}");
+    for rate in w["gripper_update_rate_hz"].as_array().unwrap() {
+        assert!(rate.as_f64().unwrap() >= 0.5 * fps, "gripper tracker updates at {rate} Hz while planning, camera at {fps} Hz: {w}");
+    }
     // The plan is in the report: facets, the chosen site, the images it was made on.
     let p = &r.daemon["plan"];
     assert!(p["facets"].as_array().is_some_and(|f| f.len() >= 3), "{p}");
     assert!(p["chosen"]["distance_mm"].as_f64().is_some_and(|d| d < 60.0), "{p}");
     let files: Vec<String> = std::fs::read_dir(&r.out.0).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    for want in ["plan.json", "plan_left.png", "plan_right.png", "servo_error.png"] {
+    for want in ["plan.json", "plan_left.png", "plan_right.png", "servo_convergence.svg"] {
         assert!(files.iter().any(|f| f == want), "{want} missing: {files:?}");
     }
     assert!(files.iter().any(|f| f.ends_with("_plan.png")), "no plan overlay: {files:?}");

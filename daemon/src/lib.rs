@@ -20,6 +20,7 @@ pub mod recovery;
 pub mod report;
 pub mod safety;
 pub mod service;
+pub mod servo_plot;
 pub mod timing;
 pub mod worker;
 

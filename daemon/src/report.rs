@@ -1,12 +1,10 @@
-//! The run report: overlay PNGs of both views at key moments with the trackers drawn, and a
-//! plot of the servo error against step. Images are copied out of shared memory at those few
-//! moments only and encoded on a separate thread ([`ReportWriter`]), never in the hard loop.
+//! The run report: overlay PNGs of both views at key moments with the trackers drawn, the
+//! plan, and the servo convergence plot ([`crate::servo_plot`]: the remaining translation
+//! in mm and yaw in degrees against servo step, SVG). Images are copied out of shared memory
+//! at those few moments only and encoded on a separate thread ([`ReportWriter`]), never in
+//! the hard loop.
 //!
 //! Overlay colours: gripper plate trackers green, target trackers red (yellow when lost).
-//! The servo plot shows `log10 |e_i|` per step for the six error components: the three mark
-//! parallaxes in pixels (blue shades), `s` and `t` in percent of the facet (orange, red) and
-//! `ρ` in milliradians (grey), from 0.01 at the bottom edge to 100 at the top, one grid line
-//! per decade (values below 0.01 sit on the bottom edge); a falling bundle is convergence.
 
 use std::path::{Path, PathBuf};
 
@@ -44,7 +42,9 @@ impl Snapshot {
 /// What the report thread does.
 pub enum ReportJob {
     Overlay(Box<Snapshot>),
-    ServoPlot(Vec<ServoTraceRow>),
+    /// The servo convergence plot (`servo_convergence.svg`): the trace and the convergence
+    /// tolerances, mm and degrees.
+    ServoPlot { rows: Vec<ServoTraceRow>, tolerance_mm: f64, tolerance_deg: f64 },
     /// The planner's facets and grasp sites on both views (`NN_plan.png`) and `plan.json`.
     Plan(Box<crate::planning::PlanOutput>),
 }
@@ -67,9 +67,10 @@ impl ReportWriter {
                 let path = out.join(format!("{count:02}_{}.png", s.label));
                 overlay(&s).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
             }
-            ReportJob::ServoPlot(rows) => {
-                let path = out.join("servo_error.png");
-                servo_plot(&rows).save(&path).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
+            ReportJob::ServoPlot { rows, tolerance_mm, tolerance_deg } => {
+                let path = out.join("servo_convergence.svg");
+                let svg = crate::servo_plot::servo_plot_svg(&rows, tolerance_mm, tolerance_deg).map_err(|e| format!("{}: {e}", path.display()))?;
+                std::fs::write(&path, svg).map(|_| path.clone()).map_err(|e| format!("{}: {e}", path.display()))
             }
             ReportJob::Plan(p) => {
                 count += 1;
@@ -259,46 +260,6 @@ pub fn draw_line(img: &mut RgbImage, a: [f64; 2], b: [f64; 2], colour: Rgb<u8>) 
     }
 }
 
-/// `log10 |e|` of the six error components against step (see the module docs).
-pub fn servo_plot(rows: &[ServoTraceRow]) -> RgbImage {
-    let (w, h, margin) = (640u32, 360u32, 30.0);
-    let mut img = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let (x0, x1, y0, y1) = (margin, w as f64 - margin, h as f64 - margin, margin);
-    let grey = Rgb([160, 160, 160]);
-    draw_line(&mut img, [x0, y0], [x1, y0], Rgb([0, 0, 0]));
-    draw_line(&mut img, [x0, y0], [x0, y1], Rgb([0, 0, 0]));
-    // Decades 0.01 .. 100.
-    for d in 0..=4 {
-        let y = y0 + (y1 - y0) * d as f64 / 4.0;
-        draw_line(&mut img, [x0 - 5.0, y], [x1, y], if d == 0 { Rgb([0, 0, 0]) } else { Rgb([225, 225, 225]) });
-    }
-    let n = rows.len().max(2) as f64 - 1.0;
-    let colours = [Rgb([20, 60, 200]), Rgb([60, 120, 230]), Rgb([120, 170, 250]), Rgb([240, 140, 20]), Rgb([200, 30, 30]), grey];
-    let to_xy = |i: usize, v: f64, k: usize| {
-        let v = match k {
-            3 | 4 => v * 100.0,
-            5 => v * 1000.0,
-            _ => v,
-        };
-        let l = v.abs().max(1e-6).log10().clamp(-2.0, 2.2) + 2.0;
-        [x0 + (x1 - x0) * i as f64 / n, y0 + (y1 - y0) * l / 4.0]
-    };
-    for (i, r) in rows.iter().enumerate() {
-        let x = x0 + (x1 - x0) * i as f64 / n;
-        draw_line(&mut img, [x, y0], [x, y0 + 4.0], Rgb([0, 0, 0]));
-        if i == 0 {
-            continue;
-        }
-        for (k, colour) in colours.iter().enumerate() {
-            let (a, b) = (rows[i - 1].error[k], r.error[k]);
-            if a.is_finite() && b.is_finite() {
-                draw_line(&mut img, to_xy(i - 1, a, k), to_xy(i, b, k), *colour);
-            }
-        }
-    }
-    img
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -316,19 +277,5 @@ mod tests {
         assert_eq!(*img.get_pixel(20, 10), GRIPPER, "gripper left edge");
         assert_eq!(*img.get_pixel(160, 50), LOST, "target right (lost), shifted into the right half");
         assert_eq!(*img.get_pixel(60, 50), Rgb([50, 50, 50]), "nothing drawn in the left half for a right tracker");
-    }
-
-    #[test]
-    fn servo_plot_falls_with_the_error() {
-        let rows: Vec<ServoTraceRow> = (0..10)
-            .map(|i| ServoTraceRow { step: i, frame: 0, error: [100.0 / 2f64.powi(i as i32), f64::NAN, f64::NAN, f64::NAN, f64::NAN, f64::NAN], offset_m: 0.0, offset_yaw_rad: 0.0 })
-            .collect();
-        let img = servo_plot(&rows);
-        // The first parallax line starts at 100 px (the top decade line, y = 30) and ends at
-        // 0.2 px (between the 0.1 and 1 lines: y = 330 - 75 * 1.3 = 232).
-        let column_has_blue = |x: u32, ys: std::ops::Range<u32>| ys.into_iter().any(|y| *img.get_pixel(x, y) == Rgb([20, 60, 200]));
-        assert!(column_has_blue(31, 28..40), "start at 100 px");
-        assert!(!column_has_blue(31, 150..330));
-        assert!(column_has_blue(608, 222..242), "end at 0.2 px");
     }
 }

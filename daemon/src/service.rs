@@ -161,7 +161,11 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     let outcome = hl.outcome(start.elapsed().as_secs_f64());
     let (report_files, report_errors) = match report {
         Some(mut rep) => {
-            rep.submit(ReportJob::ServoPlot(outcome.servo_trace.clone()));
+            rep.submit(ReportJob::ServoPlot {
+                rows: outcome.servo_trace.clone(),
+                tolerance_mm: hl.mission.cfg.servo.converged_m * 1e3,
+                tolerance_deg: hl.mission.cfg.servo.converged_deg,
+            });
             rep.finish()
         }
         None => (Vec::new(), Vec::new()),

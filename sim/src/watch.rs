@@ -79,6 +79,16 @@ pub struct PlanWatch {
     /// Largest jump of a gripper tracker's update count between consecutive `planning`
     /// frames (1 when it updated on every frame).
     pub max_update_step: u64,
+    /// Simulated time from the first to the last `planning` frame, s.
+    pub planning_window_s: f64,
+    /// Gripper tracker updates per second of simulated time over that window (left,
+    /// right): the camera frame rate when the trackers kept up with every frame, 0 for a
+    /// tracker frozen while the planner works.
+    pub gripper_update_rate_hz: [f64; 2],
+    /// The camera frame rate, for comparison, Hz.
+    pub frame_rate_hz: f64,
+    #[serde(skip)]
+    first_frame: Option<u64>,
     #[serde(skip)]
     first: Option<[u64; 2]>,
     #[serde(skip)]
@@ -165,8 +175,16 @@ impl DaemonWatch {
                     self.plan.max_update_step = self.plan.max_update_step.max(step);
                 }
                 let first = *self.plan.first.get_or_insert(now);
+                let first_frame = *self.plan.first_frame.get_or_insert(frame);
                 self.plan.last = Some(now);
-                self.plan.gripper_updates_while_planning = [now[0].saturating_sub(first[0]), now[1].saturating_sub(first[1])];
+                let updates = [now[0].saturating_sub(first[0]), now[1].saturating_sub(first[1])];
+                self.plan.gripper_updates_while_planning = updates;
+                let fps = f64::from(sim.scenario.render.frame_rate_hz);
+                self.plan.frame_rate_hz = fps;
+                self.plan.planning_window_s = frame.saturating_sub(first_frame) as f64 / fps;
+                if self.plan.planning_window_s > 0.0 {
+                    self.plan.gripper_update_rate_hz = updates.map(|u| u as f64 / self.plan.planning_window_s);
+                }
             }
         }
         // Identified when the target trackers appear, and again if they are put on another

@@ -475,8 +475,8 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
     for png in pngs.iter().filter(|p| p.ends_with("_plan.png")) {
         let _ = write!(page, "<h2>Plan</h2><p>{}</p><img src=\"{png}\">", esc(&caption(png)));
     }
-    if dir.join("servo_error.png").exists() {
-        let _ = write!(page, "<h2>Servo convergence</h2><p>log10 |error| per step: mark parallaxes (px, blues), s and t (% of the facet, orange, red), angle (mrad, grey)</p><img src=\"servo_error.png\">");
+    if dir.join("servo_convergence.svg").exists() {
+        let _ = write!(page, "<h2>Servo convergence</h2><p>the move the servo still estimated to its goal, per step: translation (mm, upper) and yaw (degrees, lower), log axes; dashed: the convergence tolerances</p><img src=\"servo_convergence.svg\">");
     }
     let _ = write!(page, "<h2>Key moments</h2>");
     for png in pngs.iter().filter(|p| !p.ends_with("_plan.png")) {

@@ -50,7 +50,7 @@ pub struct DaemonArgs {
     point: Option<[f64; 3]>,
     /// Report folder: overlay PNGs of both views at key moments (trackers drawn), the plan
     /// (NN_plan.png: facets, grasp sites, the chosen one; plan.json), the servo error plot
-    /// (servo_error.png) and daemon.json (the outcome).
+    /// (servo_convergence.svg) and daemon.json (the outcome).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Print the outcome as one JSON object: success, phase_reached, final_phase,

@@ -37,7 +37,8 @@ use serde_json::{json, Value};
 /// Prints a summary, or with --json one object: success, phase_reached, final_phase,
 /// failure_reason, target_source (plan or hint), target_block, targeted_block,
 /// targeted_face, indicated_point_m, plan_candidates, planner_ms, planning_frames,
-/// gripper_updates_while_planning, servo_steps, final_plane_error_mm, final_angle_error_deg,
+/// gripper_updates_while_planning, gripper_update_rate_hz (per second of simulated time
+/// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
 /// grasp_plane_error_mm (jaw-centre plane from the block's mid-plane when the jaws closed),
 /// loop_us_p50, loop_us_p99, deadline_misses, calibration_residual_px, sim_frames, wall_s,
 /// seed, report (folder or null).
@@ -60,7 +61,7 @@ pub struct RunArgs {
     json: bool,
     /// Report folder: overlay PNGs of both views at key moments with the trackers drawn, the
     /// plan (NN_plan.png: facets, grasp sites, the chosen one, the indicated point; plan.json),
-    /// servo_error.png, daemon.json, sim.json, run.json, hint.json, daemon.toml, and both
+    /// servo_convergence.svg, daemon.json, sim.json, run.json, hint.json, daemon.toml, and both
     /// children's stderr. Without it, everything goes to a temporary folder that is removed.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
@@ -364,6 +365,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         "planner_ms": d["planning"]["planner_ms"],
         "planning_frames": d["planning"]["frames"],
         "gripper_updates_while_planning": d["planning"]["gripper_updates"],
+        "gripper_update_rate_hz": v["daemon"]["plan"]["gripper_update_rate_hz"],
         "servo_steps": d["servo_steps"],
         "final_plane_error_mm": conv["final_plane_error_mm"],
         "final_angle_error_deg": conv["final_angle_error_deg"],
@@ -397,7 +399,7 @@ fn print_summary(s: &Value) {
     );
     if s["target_source"] == "plan" {
         println!(
-            "  plan: {} facets, {} grasp candidates, chosen {} mm wide on block '{}' (face {}; the target is '{}'); planner {}, {} frames answered meanwhile, gripper tracked {} times",
+            "  plan: {} facets, {} grasp candidates, chosen {} mm wide on block '{}' (face {}; the target is '{}'); planner {}, {} frames answered meanwhile, gripper tracked {} times ({} Hz)",
             s["plan_facets"],
             s["plan_candidates"],
             num("plan_width_mm", ""),
@@ -406,7 +408,8 @@ fn print_summary(s: &Value) {
             s["target_block"].as_str().unwrap_or("?"),
             num("planner_ms", " ms"),
             s["planning_frames"],
-            s["gripper_updates_while_planning"]
+            s["gripper_updates_while_planning"],
+            s["gripper_update_rate_hz"]
         );
     }
     println!(

@@ -144,8 +144,8 @@ impl PlanPhase {
                     gripper: GripperModel {
                         finger_thickness_m: p.finger_thickness_m,
                         finger_breadth_m: p.finger_breadth_m,
-                        jaw_opening_m: Some(m.cfg.gripper.max_opening_m.max(p.max_width_m)),
-                        max_width_m: p.max_width_m,
+                        jaw_opening_m: Some(m.cfg.gripper.max_opening_m.max(m.cfg.gripper.max_grasp_width_m)),
+                        max_width_m: m.cfg.gripper.max_grasp_width_m,
                         ..GripperModel::default()
                     },
                     max_view_angle_rad: p.max_view_angle_deg.min(90.0).to_radians(),

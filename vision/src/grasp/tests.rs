@@ -349,3 +349,61 @@ fn the_grasped_objects_own_faces_collide_only_past_the_object_tolerance() {
     let other = plan_grasps(&scene(f, vec![]), None, &GraspConfig { object_tolerance_m: 0.008, ..Default::default() }).unwrap();
     assert!(other.candidates.iter().all(|g| g.site.facet != 0));
 }
+
+#[test]
+fn the_site_is_the_middle_of_the_overlap_of_top_and_rear_edge() {
+    // A face 60 mm along y with its top edge at 40 mm; a loose rear edge of the same object
+    // 30 mm behind, from y = 30 to 90 mm: they overlap over y 30..60 mm, and the site is
+    // the overlap's middle (the most central site of the pair), not the face's.
+    let front = facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.06, 0.0), p(0.04, 0.06, 0.04), p(0.04, 0.0, 0.04)], 0);
+    let rear = SceneEdge { segment: Segment3::new(p(0.01, 0.03, 0.04), p(0.01, 0.09, 0.04)), component: 0 };
+    let g = plan(&scene(vec![front], vec![rear])).chosen.expect("a grasp");
+    assert_eq!(g.site.rear_edge, EdgeRef::Loose(0));
+    assert!((g.site.front_m - p(0.04, 0.045, 0.04)).norm() < 1e-12, "{:?}", g.site.front_m);
+    assert!((g.site.rear_m - p(0.01, 0.045, 0.04)).norm() < 1e-12, "{:?}", g.site.rear_m);
+    assert!((g.site.centre_m - p(0.025, 0.045, 0.04)).norm() < 1e-12);
+    assert!((g.site.facet_st[0] - 0.75).abs() < 1e-12 && (g.site.facet_st[1] - 1.0).abs() < 1e-12, "{:?}", g.site.facet_st);
+    // Pairs that overlap by less than `min_overlap_m` are no pairs.
+    let front = facet(vec![p(0.04, 0.0, 0.0), p(0.04, 0.06, 0.0), p(0.04, 0.06, 0.04), p(0.04, 0.0, 0.04)], 0);
+    let sliver = SceneEdge { segment: Segment3::new(p(0.01, 0.057, 0.04), p(0.01, 0.09, 0.04)), component: 0 };
+    let r = plan(&scene(vec![front], vec![sliver]));
+    assert!(r.rejected.iter().any(|x| x.reason == RejectReason::NoOverlap && x.rear_edge == Some(EdgeRef::Loose(0))), "{:?}", r.rejected);
+}
+
+#[test]
+fn rejected_sites_keep_their_place_width_and_reason() {
+    // Cube A with a tall block B 10 mm behind it (the finger case above): the site across A
+    // is rejected, and the rejection says where it was, how wide, against which rear edge,
+    // and what it hit.
+    let s = a_and_b(0.03);
+    let r = plan(&s);
+    let hit = r
+        .rejected
+        .iter()
+        .find(|x| x.facet == 0 && matches!(x.reason, RejectReason::FingerCollision { .. }) && x.site.is_some_and(|s| (s.width_m - 0.04).abs() < 1e-12))
+        .unwrap_or_else(|| panic!("{:?}", r.rejected));
+    let site = hit.site.unwrap();
+    assert!((site.front_m - p(0.04, 0.02, 0.04)).norm() < 1e-12, "{site:?}");
+    assert_eq!(hit.front_edge, Some(site.front_edge));
+    assert_eq!(hit.rear_edge, Some(site.rear_edge));
+    let RejectReason::FingerCollision { feature } = hit.reason else { unreachable!() };
+    assert_eq!(feature_component(&s, feature), 1, "the feature hit is B's");
+    // Too wide: the site and its width are kept as well.
+    let wide = plan(&scene(block([0.0, 0.06], [0.0, 0.04], 0.04, 0), vec![]));
+    let too_wide = wide.rejected.iter().find(|x| matches!(x.reason, RejectReason::TooWide { .. })).expect("a too-wide site");
+    assert!(too_wide.site.is_some_and(|s| (s.width_m - 0.06).abs() < 1e-12 && (s.front_m - p(0.06, 0.02, 0.04)).norm() < 1e-12), "{too_wide:?}");
+    // Facet-level rules reject before a site exists, with the measured angle.
+    let leaning = plan(&leaning_block(25.0));
+    assert!(leaning.rejected.iter().any(|x| x.site.is_none() && matches!(x.reason, RejectReason::FacetNotVertical { tilt_rad } if (tilt_rad.to_degrees() - 25.0).abs() < 1e-9)));
+}
+
+#[test]
+fn the_width_limit_is_the_gripper_models() {
+    // A 60 mm deep block: over the default 50 mm, within a gripper model allowing 64 mm.
+    let s = scene(block([0.0, 0.06], [0.0, 0.04], 0.04, 0), vec![]);
+    assert!(plan(&s).chosen.is_none());
+    let wide = GraspConfig { gripper: GripperModel { max_width_m: 0.064, ..Default::default() }, ..Default::default() };
+    let g = plan_grasps(&s, None, &wide).unwrap().chosen.expect("60 mm within a 64 mm limit");
+    assert!((g.site.width_m - 0.06).abs() < 1e-12);
+    assert!((g.opening_m - 0.08).abs() < 1e-12, "width plus both fingers' clearance");
+}
