@@ -14,12 +14,13 @@ use crate::phase::ServoTraceRow;
 const FLOOR: f64 = 1e-3;
 
 /// One panel's series: `(step, value)`, values floored at [`FLOOR`].
-fn series(rows: &[ServoTraceRow], value: impl Fn(&ServoTraceRow) -> f64) -> Vec<(f64, f64)> {
-    rows.iter().filter_map(|r| {
-        let v = value(r).abs();
-        v.is_finite().then_some((f64::from(r.step), v.max(FLOOR)))
-    })
-    .collect()
+fn series(rows: &[ServoTraceRow], value: impl Fn(&ServoTraceRow) -> f64) -> Vec<(u32, f64)> {
+    rows.iter()
+        .filter_map(|r| {
+            let v = value(r).abs();
+            v.is_finite().then_some((r.step, v.max(FLOOR)))
+        })
+        .collect()
 }
 
 /// The plot as an SVG document. `tolerance_mm` and `tolerance_deg` are the servo's
@@ -36,7 +37,7 @@ fn series(rows: &[ServoTraceRow], value: impl Fn(&ServoTraceRow) -> f64) -> Vec<
 pub fn servo_plot_svg(rows: &[ServoTraceRow], tolerance_mm: f64, tolerance_deg: f64) -> Result<String, String> {
     let translation = series(rows, |r| r.offset_m * 1e3);
     let yaw = series(rows, |r| r.offset_yaw_rad.to_degrees());
-    let last_step = rows.iter().map(|r| f64::from(r.step)).fold(1.0, f64::max);
+    let last_step = rows.iter().map(|r| r.step).max().unwrap_or(1).max(1);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (760, 560)).into_drawing_area();
@@ -52,15 +53,16 @@ pub fn servo_plot_svg(rows: &[ServoTraceRow], tolerance_mm: f64, tolerance_deg: 
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(70)
-                .build_cartesian_2d(0.0..last_step + 0.5, (FLOOR..top).log_scale())
+                .build_cartesian_2d(0u32..last_step + 1, (FLOOR..top).log_scale())
                 .map_err(|e| e.to_string())?;
             chart
                 .configure_mesh()
                 .x_desc("servo step")
                 .y_desc(y_desc)
-                .x_labels(12)
-                .x_label_formatter(&|x| format!("{x:.0}"))
+                .x_labels((last_step as usize + 2).min(16))
                 .y_label_formatter(&|y| format!("{y}"))
+                .axis_desc_style(("sans-serif", 15))
+                .label_style(("sans-serif", 13))
                 .draw()
                 .map_err(|e| e.to_string())?;
             chart
@@ -72,7 +74,7 @@ pub fn servo_plot_svg(rows: &[ServoTraceRow], tolerance_mm: f64, tolerance_deg: 
             if tolerance.is_finite() && tolerance > 0.0 {
                 let grey = RGBColor(110, 110, 110);
                 chart
-                    .draw_series(DashedLineSeries::new([(0.0, tolerance), (last_step + 0.5, tolerance)], 6, 4, grey.stroke_width(1)))
+                    .draw_series(DashedLineSeries::new([(0, tolerance), (last_step + 1, tolerance)], 6, 4, grey.stroke_width(1)))
                     .map_err(|e| e.to_string())?
                     .label(format!("convergence tolerance ({tolerance})"))
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey));
@@ -80,6 +82,7 @@ pub fn servo_plot_svg(rows: &[ServoTraceRow], tolerance_mm: f64, tolerance_deg: 
             chart
                 .configure_series_labels()
                 .position(SeriesLabelPosition::UpperRight)
+                .label_font(("sans-serif", 13))
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .draw()
@@ -105,8 +108,13 @@ mod tests {
         for want in ["servo step", "remaining translation (mm)", "remaining yaw (°)", "convergence tolerance (0.5)", "convergence tolerance (0.3)"] {
             assert!(svg.contains(want), "{want} missing");
         }
-        // Six markers per panel.
+        // Six markers per panel, and whole steps on the step axis (each labelled once).
         assert_eq!(svg.matches("<circle").count(), 12, "{svg}");
+        // (1 is also a decade of the log axes.)
+        for step in [0, 2, 3, 4, 5, 6, 7] {
+            let label = format!(">\n{step}\n</text>");
+            assert_eq!(svg.matches(&label).count(), 2, "step {step} labelled once per panel");
+        }
     }
 
     #[test]
@@ -114,9 +122,9 @@ mod tests {
         // Values in the panel's unit; a converged step's zero sits on the floor rather than
         // vanishing from a log axis.
         let s = series(&[row(1, 10.0, 0.0), row(2, 0.1, 0.0)], |r| r.offset_m * 1e3);
-        assert_eq!(s, vec![(1.0, 10.0), (2.0, 0.1)]);
+        assert_eq!(s, vec![(1, 10.0), (2, 0.1)]);
         let y = series(&[row(1, 1.0, 0.0)], |r| r.offset_yaw_rad.to_degrees());
-        assert_eq!(y, vec![(1.0, FLOOR)]);
+        assert_eq!(y, vec![(1, FLOOR)]);
         // NaN rows (no estimate) are left out.
         assert!(series(&[row(1, f64::NAN, 0.0)], |r| r.offset_m).is_empty());
         // An empty trace still draws (axes, no line).
