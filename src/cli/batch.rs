@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 ///
 /// Each run is `handeye run SCENARIO --seed S --random-layout --json` (simulator and daemon
 /// as two processes in their own private shared-memory domain): seed S lays the
-/// scenario's blocks out at random (positions in x 0.27..0.45 m, y -0.15..0.15 m, any yaw,
+/// scenario's blocks out at random (positions in x 0.27..0.45 m (the whole block), y -0.15..0.15 m, any yaw,
 /// 60 mm apart; a task with an indicated point gets a random target with the point within
 /// 15 mm of it) and reseeds the sensor noise. The daemon plans its own grasp (with --hint:
 /// the operator hint), and the simulator judges success from ground truth: the task's
@@ -496,6 +496,43 @@ mod tests {
         assert_eq!(reason_class("plan: no grasp site (3 facets; rejected: finger_collision 2)"), "plan: no grasp site (# facets; rejected: finger_collision #)");
         // A hyphen inside a word stays; a minus sign goes with its number.
         assert_eq!(reason_class("acquire_target: wrong-way -5 mm"), "acquire_target: wrong-way # mm");
+    }
+
+    fn outcome(seed: u64, success: bool, phase: &str, reason: Option<&str>, steps: Option<f64>) -> Outcome {
+        Outcome {
+            job: Job { scenario: PathBuf::from("c.toml"), name: "c".into(), seed, out: None },
+            success,
+            phase: phase.into(),
+            reason: reason.map(String::from),
+            servo_steps: steps,
+            wall_s: 40.0 + seed as f64,
+            summary: Value::Null,
+        }
+    }
+
+    #[test]
+    fn the_summary_counts_failures_by_phase_and_reason() {
+        let runs = [
+            outcome(1, true, "done", None, Some(3.0)),
+            outcome(2, false, "servo", Some("servo: not converged after 90 s (60 steps)"), Some(60.0)),
+            outcome(3, true, "done", None, Some(5.0)),
+            outcome(4, false, "servo", Some("servo: not converged after 90 s (61 steps)"), None),
+            outcome(5, false, "plan", Some("plan: no grasp site within 60 mm of the indicated point (the nearest is 75 mm away)"), None),
+        ];
+        let r = summarise(&runs, 210.0);
+        assert_eq!(r["runs"], 5);
+        assert_eq!(r["successes"], 2);
+        assert_eq!(r["success_rate"], 0.4);
+        assert_eq!(r["failures"]["servo"]["servo: not converged after # s (# steps)"], 2);
+        assert_eq!(r["failures"]["plan"].as_object().unwrap().len(), 1);
+        // Median servo steps over the runs that lifted only; wall times over all.
+        assert_eq!(r["median_servo_steps"], 4.0);
+        assert_eq!(r["median_run_wall_s"], 43.0);
+        assert_eq!(r["failed_runs"].as_array().unwrap().len(), 3);
+        assert_eq!(r["scenarios"]["c"]["runs"], 5);
+        let t = table(&r);
+        assert!(t.contains("  2 x servo: servo: not converged after # s (# steps) (c#2, c#4)"), "{t}");
+        assert!(t.contains("40%"), "{t}");
     }
 
     #[test]

@@ -37,6 +37,10 @@ pub use pixels::{edge_support, mask_and_fill, simplify_closed, tracker_order};
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
 
+/// A planner facet with at least this share of its image area inside a hypothesised face of
+/// the same object, in both views, is that face reconstructed off (see [`plan`]).
+pub const SUPERSEDED_SHARE: f64 = 0.6;
+
 /// Everything the worker needs for one plan.
 pub struct PlanRequest {
     /// The stereo pair, as taken with the arm parked (left, right).
@@ -136,6 +140,8 @@ pub struct PlanSummary {
     pub rejected_by_reason: BTreeMap<String, usize>,
     /// Facets and top edges that failed a rule before a site existed: `(plan facet, reason)`.
     pub facet_rejections: Vec<(usize, String)>,
+    /// Planner facets left out for a hypothesised face that covers them in both views.
+    pub superseded_facets: Vec<usize>,
     pub indicated_m: Option<[f64; 3]>,
     /// The indicated point in both views, tracker pixels.
     pub indicated_px: Option<[[f64; 2]; 2]>,
@@ -278,11 +284,35 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 *summary.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
             }
         }
+        // A hypothesised face (anchored on a top face's edge and the table, its bottom edge
+        // seen) that covers a planner facet of the same object in both images is that
+        // facet's surface: the planner reconstructed it off the face (else the face would
+        // not have been hypothesised, see `hypothesise_front_faces`), and its misplaced
+        // corners would stand in the fingers' way. The planner facet is left out.
+        let mut j = 0;
+        let mut hypothesised_start = planned_facets;
+        while j < hypothesised_start {
+            let (src, facet) = (&ps.facets[j], &ps.scene.facets[j]);
+            let superseded = (hypothesised_start..ps.facets.len()).any(|k| {
+                ps.scene.facets[k].component == facet.component
+                    && pixels::covered_share(&src.left_px, &ps.facets[k].left_px) >= SUPERSEDED_SHARE
+                    && pixels::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
+            });
+            if superseded {
+                summary.superseded_facets.push(src.plan_facet);
+                ps.facets.remove(j);
+                ps.scene.facets.remove(j);
+                hypothesised_start -= 1;
+                *summary.rejected_by_reason.entry("superseded_by_hypothesised_face".into()).or_insert(0) += 1;
+            } else {
+                j += 1;
+            }
+        }
     }
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
     for (fi, f) in plan.facets.iter().enumerate() {
-        let component = ps.facets.iter().position(|src| src.plan_facet == fi).map(|k| ps.scene.facets[k].component);
+        let component = ps.facets.iter().position(|src| !src.hypothesised && src.plan_facet == fi).map(|k| ps.scene.facets[k].component);
         summary.facets.push(FacetSummary {
             plan_facet: fi,
             left_px: to_tracker(&f.facet.left),

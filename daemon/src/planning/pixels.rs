@@ -23,6 +23,27 @@ fn inside(poly: &[[f64; 2]], p: [f64; 2]) -> bool {
     odd
 }
 
+/// Share of polygon `a`'s area (pixel centres inside it) that lies inside polygon `b`; 0
+/// when `a` covers no pixel centre.
+pub fn covered_share(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    if a.len() < 3 || b.len() < 3 || a.iter().chain(b).flatten().any(|v| !v.is_finite()) {
+        return 0.0;
+    }
+    let lo = |k: usize| a.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min).floor() as i64;
+    let hi = |k: usize| a.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max).ceil() as i64;
+    let (mut total, mut shared) = (0u64, 0u64);
+    for y in lo(1)..=hi(1) {
+        for x in lo(0)..=hi(0) {
+            let p = [x as f64, y as f64];
+            if inside(a, p) {
+                total += 1;
+                shared += u64::from(inside(b, p));
+            }
+        }
+    }
+    if total == 0 { 0.0 } else { shared as f64 / total as f64 }
+}
+
 /// Replaces the pixels inside `poly` (or within `margin_px` of it; tracker pixels) with a
 /// smooth fill from the unmasked pixels around (module docs). Returns how many were masked.
 pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> usize {
@@ -270,6 +291,19 @@ mod tests {
         assert_eq!(mask_and_fill(&mut img, &[[1.0, 1.0], [2.0, 2.0]], 1.0), 0);
         assert_eq!(mask_and_fill(&mut img, &[[f64::NAN, 1.0], [2.0, 2.0], [3.0, 1.0]], 1.0), 0);
         assert_eq!(img, before);
+    }
+
+    #[test]
+    fn covered_share_is_the_share_of_the_first_polygon_inside_the_second() {
+        let square = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let left_half = [[-1.0, -1.0], [4.9, -1.0], [4.9, 11.0], [-1.0, 11.0]];
+        assert_eq!(covered_share(&square, &square), 1.0);
+        // Pixel centres 0..=4 of the ten columns inside the square (0..10).
+        let half = covered_share(&square, &left_half);
+        assert!((half - 0.5).abs() < 0.01, "{half}");
+        assert_eq!(covered_share(&left_half, &[[20.0, 0.0], [30.0, 0.0], [30.0, 10.0]]), 0.0);
+        assert_eq!(covered_share(&square, &[[0.0, 0.0], [1.0, 1.0]]), 0.0, "not a polygon");
+        assert_eq!(covered_share(&[[f64::NAN, 0.0], [1.0, 0.0], [1.0, 1.0]], &square), 0.0);
     }
 
     #[test]

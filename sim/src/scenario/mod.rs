@@ -367,7 +367,9 @@ impl Scenario {
 
     /// Where [`Self::randomise_layout`] puts blocks: x and y ranges of their centres, metres
     /// (the calibration cage's footprint widened in y: in view of both cameras and in reach
-    /// with the gripper's plate facing the cameras).
+    /// with the gripper's plate facing the cameras). Towards the cameras the whole block
+    /// stays inside the x range (its bounding circle): the bottom rows of the images end
+    /// ~0.47 m out, and a face cut by the image border cannot be tracked.
     pub const LAYOUT_X_M: [f64; 2] = [0.27, 0.45];
     pub const LAYOUT_Y_M: [f64; 2] = [-0.15, 0.15];
     /// Smallest gap between two blocks' bounding circles, metres: room for a finger of the
@@ -378,8 +380,9 @@ impl Scenario {
 
     /// A seeded random layout of the scenario's blocks (batch runs): uses `seed` for every
     /// random choice, then places every block (kind, size and shades as written) at a random
-    /// position in [`Self::LAYOUT_X_M`] x [`Self::LAYOUT_Y_M`] with a random yaw (any
-    /// angle), at least [`Self::LAYOUT_GAP_M`] between any two blocks' bounding circles.
+    /// position in [`Self::LAYOUT_X_M`] x [`Self::LAYOUT_Y_M`] (wholly inside the x range on
+    /// the cameras' side) with a random yaw (any angle), at least [`Self::LAYOUT_GAP_M`]
+    /// between any two blocks' bounding circles.
     /// The task stays meaningful: with a named target, that block; with an indicated point,
     /// a random block becomes the target and the point is put within
     /// [`Self::LAYOUT_POINT_OFFSET_M`] of its centre (so it is the nearest block by far).
@@ -395,8 +398,9 @@ impl Scenario {
                 let r = radius(b);
                 let mut ok = None;
                 for _ in 0..200 {
+                    let x_max = (Self::LAYOUT_X_M[1] - r).max(Self::LAYOUT_X_M[0]);
                     let p = [
-                        Self::LAYOUT_X_M[0] + rng.next_f64() * (Self::LAYOUT_X_M[1] - Self::LAYOUT_X_M[0]),
+                        Self::LAYOUT_X_M[0] + rng.next_f64() * (x_max - Self::LAYOUT_X_M[0]),
                         Self::LAYOUT_Y_M[0] + rng.next_f64() * (Self::LAYOUT_Y_M[1] - Self::LAYOUT_Y_M[0]),
                     ];
                     if placed.iter().all(|(q, rq)| (p[0] - q[0]).hypot(p[1] - q[1]) >= r + rq + Self::LAYOUT_GAP_M) {
@@ -488,7 +492,8 @@ mod tests {
             assert_eq!(s.seed, seed);
             for (i, a) in s.blocks.iter().enumerate() {
                 assert_eq!((a.kind, a.size_mm), (clutter.blocks[i].kind, clutter.blocks[i].size_mm), "blocks keep their kind and size");
-                assert!((Scenario::LAYOUT_X_M[0]..=Scenario::LAYOUT_X_M[1]).contains(&a.position_m[0]));
+                let r = 0.5e-3 * a.size_mm[0].hypot(a.size_mm[1]);
+                assert!((Scenario::LAYOUT_X_M[0]..=Scenario::LAYOUT_X_M[1] - r).contains(&a.position_m[0]), "seed {seed}: {} wholly inside x", a.name);
                 assert!((Scenario::LAYOUT_Y_M[0]..=Scenario::LAYOUT_Y_M[1]).contains(&a.position_m[1]));
                 for b in &s.blocks[i + 1..] {
                     let d = (a.position_m[0] - b.position_m[0]).hypot(a.position_m[1] - b.position_m[1]);
