@@ -245,6 +245,10 @@ pub struct PlanSettings {
     /// along the edge, m.
     pub finger_thickness_m: f64,
     pub finger_breadth_m: f64,
+    /// A rear edge pairs with a top edge when they are parallel within this, degrees. The
+    /// grasp planner's default is 10°; the facets reconstructed from the simulator's pairs
+    /// turn their short far edges by up to ~15° (a 30 mm cube's top face seen end-on).
+    pub parallel_tolerance_deg: f64,
     /// The grasped block's own other faces may reach this far past the contact planes
     /// (reconstruction error) before a finger counts as colliding with them, m.
     pub object_tolerance_m: f64,
@@ -281,6 +285,7 @@ impl Default for PlanSettings {
             arm_clearance_m: 0.02,
             finger_thickness_m: 0.012,
             finger_breadth_m: 0.020,
+            parallel_tolerance_deg: 15.0,
             object_tolerance_m: 0.008,
             max_view_angle_deg: 60.0,
             hypothesise_front_faces: true,
@@ -522,6 +527,7 @@ impl DaemonConfig {
             ("plan.finger_breadth_m", self.plan.finger_breadth_m),
             ("gripper.max_grasp_width_m", self.gripper.max_grasp_width_m),
             ("plan.max_view_angle_deg", self.plan.max_view_angle_deg),
+            ("plan.parallel_tolerance_deg", self.plan.parallel_tolerance_deg),
             ("plan.max_site_distance_m", self.plan.max_site_distance_m),
             ("servo.max_step_m", self.servo.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),

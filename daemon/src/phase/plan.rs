@@ -149,6 +149,7 @@ impl PlanPhase {
                         ..GripperModel::default()
                     },
                     max_view_angle_rad: p.max_view_angle_deg.min(90.0).to_radians(),
+                    parallel_tolerance_rad: p.parallel_tolerance_deg.min(45.0).to_radians(),
                     object_tolerance_m: p.object_tolerance_m,
                     ..GraspConfig::default()
                 };
