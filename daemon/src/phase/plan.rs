@@ -167,6 +167,7 @@ impl PlanPhase {
                     max_distance_m: p.max_site_distance_m,
                     join_m: p.join_m,
                     front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
+                    rear_edges_from_image: p.rear_edges_from_image,
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,

@@ -41,6 +41,9 @@ pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
 /// the same object, in both views, is that face reconstructed off (see [`plan`]).
 pub const SUPERSEDED_SHARE: f64 = 0.6;
 
+/// `PlannedScene::edge_matches` entry of a rear edge found in the images (no planner match).
+pub const IMAGE_REAR_EDGE: usize = usize::MAX;
+
 /// Everything the worker needs for one plan.
 pub struct PlanRequest {
     /// The stereo pair, as taken with the arm parked (left, right).
@@ -66,6 +69,9 @@ pub struct PlanRequest {
     /// Hypothesise the vertical faces below top faces' front edges that the planner missed,
     /// down to the table at this height (robot frame, m); `None`: do not.
     pub front_faces_to_table_z_m: Option<f64>,
+    /// When no site is near the indicated point, look in the images for rear edges behind
+    /// the vertical faces there (see `rear_edges_from_image`).
+    pub rear_edges_from_image: bool,
     /// A grasp whose centre is farther than this from the indicated point (plan view) is
     /// not on the block the operator meant: no grasp then, m.
     pub max_distance_m: f64,
@@ -142,6 +148,9 @@ pub struct PlanSummary {
     pub facet_rejections: Vec<(usize, String)>,
     /// Planner facets left out for a hypothesised face that covers them in both views.
     pub superseded_facets: Vec<usize>,
+    /// Rear edges found in the images behind vertical faces near the indicated point:
+    /// `(plan facet of the face, depth behind it in mm, edge support 0..1 in the weaker view)`.
+    pub image_rear_edges: Vec<(usize, f64, f64)>,
     pub indicated_m: Option<[f64; 3]>,
     /// The indicated point in both views, tracker pixels.
     pub indicated_px: Option<[[f64; 2]; 2]>,
@@ -214,6 +223,105 @@ fn project_scene(geo: &StereoGeometry, model: &AffineStereo, lever_m: &[f64; 3],
 
 fn to_tracker_px(p: [f64; 2]) -> [f64; 2] {
     [p[0] - PLANNER_FROM_TRACKER_PX, p[1] - PLANNER_FROM_TRACKER_PX]
+}
+
+/// Rear edges found in the images, for the vertical faces near the indicated point whose top
+/// edge pairs with nothing (the planner reconstructed the top face behind it off, or missed
+/// it). A block's top face is horizontal at its front face's top edge; its far edge is a
+/// line at that height, parallel to the top edge, some depth behind it, that both images
+/// show as a step (the top face is lit, what lies behind is not the same grey). Depths from
+/// `MIN_DEPTH_M` to `MAX_DEPTH_M` are tried in 1 mm steps: past the front edge's own step
+/// (support under 0.3), the first with edge support of at least `MIN_SUPPORT` in both views
+/// is taken, moved on while the support grows. The edge
+/// joins the face's object, and a top face with that outline supersedes planner facets of
+/// the object it covers in both views (misplaced, they would stand in the fingers' way).
+/// Returns how many edges were added.
+fn rear_edges_from_image(
+    ps: &mut handeye_vision::grasp::PlannedScene,
+    project: &dyn Fn(&Vector3<f64>) -> [[f64; 2]; 2],
+    images: &[ImageBuf; 2],
+    indicated: &Vector3<f64>,
+    max_distance_m: f64,
+    summary: &mut PlanSummary,
+) -> usize {
+    const MIN_DEPTH_M: f64 = 0.008;
+    const MAX_DEPTH_M: f64 = 0.055;
+    const MIN_SUPPORT: f64 = 0.7;
+    let toward = ps.scene.toward_viewer;
+    let mut added = Vec::new();
+    for (k, f) in ps.scene.facets.iter().enumerate() {
+        let n = f.polygon_m.len();
+        let Some(mut normal) = (0..n).map(|i| f.polygon_m[i].cross(&f.polygon_m[(i + 1) % n])).sum::<Vector3<f64>>().try_normalize(1e-12) else { continue };
+        if normal.dot(&toward) < 0.0 {
+            normal = -normal;
+        }
+        if normal.z.abs() > 20f64.to_radians().sin() {
+            continue;
+        }
+        let centroid = f.polygon_m.iter().sum::<Vector3<f64>>() / n as f64;
+        if (centroid.xy() - indicated.xy()).norm() > max_distance_m + 0.03 {
+            continue;
+        }
+        let back = -Vector3::new(normal.x, normal.y, 0.0).normalize();
+        // The top edge: the highest side within 30° of horizontal, at least 10 mm long.
+        let top = (0..n)
+            .map(|i| (f.polygon_m[i], f.polygon_m[(i + 1) % n]))
+            .filter(|(a, b)| (b - a).norm() >= 0.010 && ((b.z - a.z).abs() / (b - a).norm()) <= 30f64.to_radians().sin())
+            .max_by(|x, y| (x.0.z + x.1.z).total_cmp(&(y.0.z + y.1.z)));
+        let Some((a, b)) = top else { continue };
+        // Along the edge's middle 70 % (its ends meet other faces' edges).
+        let (a_in, b_in) = (a + 0.15 * (b - a), b - 0.15 * (b - a));
+        let support_at = |d: f64| {
+            let (pa, pb) = (project(&(a_in + back * d)), project(&(b_in + back * d)));
+            edge_support(&images[0], pa[0], pb[0]).min(edge_support(&images[1], pa[1], pb[1]))
+        };
+        let steps = ((MAX_DEPTH_M - MIN_DEPTH_M) * 1e3).round() as usize;
+        let depths: Vec<f64> = (0..=steps).map(|i| MIN_DEPTH_M + i as f64 * 1e-3).collect();
+        // Past the front edge first (its step reaches a few pixels back: the top face is
+        // foreshortened), then the first line both views show.
+        let Some(clear) = depths.iter().position(|&d| support_at(d) < 0.3) else { continue };
+        let Some(first) = depths.iter().skip(clear).position(|&d| support_at(d) >= MIN_SUPPORT).map(|i| i + clear) else { continue };
+        let mut best = (depths[first], support_at(depths[first]));
+        for &d in &depths[first + 1..] {
+            let s = support_at(d);
+            if s < best.1 {
+                break;
+            }
+            best = (d, s);
+        }
+        let (d, support) = best;
+        let (ra, rb) = (a + back * d, b + back * d);
+        let top_face = [a, b, rb, ra].map(|p| project(&p));
+        added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, d, support));
+    }
+    let count = added.len();
+    let mut drop = vec![false; ps.scene.facets.len()];
+    for (k, component, segment, top_face, d, support) in added {
+        summary.image_rear_edges.push((ps.facets[k].plan_facet, d * 1e3, support));
+        ps.scene.edges.push(handeye_vision::grasp::SceneEdge { segment, component });
+        ps.edge_matches.push(IMAGE_REAR_EDGE);
+        let left: Vec<[f64; 2]> = top_face.iter().map(|p| [p[0][0] + PLANNER_FROM_TRACKER_PX, p[0][1] + PLANNER_FROM_TRACKER_PX]).collect();
+        let right: Vec<[f64; 2]> = top_face.iter().map(|p| [p[1][0] + PLANNER_FROM_TRACKER_PX, p[1][1] + PLANNER_FROM_TRACKER_PX]).collect();
+        for j in 0..ps.facets.len() {
+            if j != k
+                && !ps.facets[j].hypothesised
+                && ps.scene.facets[j].component == component
+                && pixels::covered_share(&ps.facets[j].left_px, &left) >= SUPERSEDED_SHARE
+                && pixels::covered_share(&ps.facets[j].right_px, &right) >= SUPERSEDED_SHARE
+            {
+                drop[j] = true;
+            }
+        }
+    }
+    for j in (0..drop.len()).rev() {
+        if drop[j] {
+            summary.superseded_facets.push(ps.facets[j].plan_facet);
+            *summary.rejected_by_reason.entry("superseded_by_image_top_face".into()).or_insert(0) += 1;
+            ps.facets.remove(j);
+            ps.scene.facets.remove(j);
+        }
+    }
+    count
 }
 
 fn arr3(v: &Vector3<f64>) -> [f64; 3] {
@@ -333,7 +441,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         });
     }
     let indicated = req.indicated_m.map(Vector3::from);
-    let grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
+    let mut grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
         Ok(g) => g,
         Err(e) => {
             summary.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
@@ -341,6 +449,21 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images };
         }
     };
+    // No site near the point: look in the images for the rear edges behind the vertical
+    // faces there (see `rear_edges_from_image`) and plan again.
+    let near_point = |g: &Grasp, p: &Vector3<f64>| (g.site.centre_m.xy() - p.xy()).norm() <= req.max_distance_m;
+    if req.rear_edges_from_image
+        && let Some(p) = indicated
+        && !grasps.candidates.iter().any(|g| near_point(g, &p))
+    {
+        let project = |q: &Vector3<f64>| project_scene(&geo, &req.model, &req.lever_m, q);
+        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.max_distance_m, &mut summary);
+        if found > 0
+            && let Ok(g) = plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp)
+        {
+            grasps = g;
+        }
+    }
     let site_summary = |g: Option<&Grasp>, site: &handeye_vision::grasp::GraspSite, reason: Option<String>| {
         let px = project_scene(&geo, &req.model, &req.lever_m, &site.front_m);
         SiteSummary {
@@ -375,7 +498,10 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                     let what = match feature {
                         FeatureRef::Facet(i) => format!("facet {}", ps.facets[i].plan_facet),
                         FeatureRef::Edge(EdgeRef::Facet { facet, .. }) => format!("an edge of facet {}", ps.facets[facet].plan_facet),
-                        FeatureRef::Edge(EdgeRef::Loose(i)) => format!("edge {}", ps.edge_matches[i]),
+                        FeatureRef::Edge(EdgeRef::Loose(i)) => match ps.edge_matches.get(i) {
+                            Some(&m) if m != IMAGE_REAR_EDGE => format!("edge {m}"),
+                            _ => "a rear edge found in the images".to_string(),
+                        },
                     };
                     format!("{name} with {what}")
                 }
