@@ -260,10 +260,11 @@ pub struct PlanSettings {
     /// down to the table (`grasp.table_z_m`): blocks rest on the table, and a face towards
     /// the cameras under a seen top edge is seen too; the target trackers check it.
     pub hypothesise_front_faces: bool,
-    /// When no grasp site is near the indicated point, look in the images for the rear edge
-    /// of the top face behind each vertical face there (a line at the face's top-edge
-    /// height, 8-55 mm behind it, that both views show as a step), and plan again: the
-    /// planner's top faces seen at a grazing angle come out tilted or are missed.
+    /// When no grasp site is near the indicated point (or only zero-width ones), look in the
+    /// images for the rear edge of the top face behind each vertical face there (a line at
+    /// the face's top-edge height, 8-55 mm behind it, that both views show as a step), and
+    /// plan again: the planner's top faces seen at a grazing angle come out tilted or are
+    /// missed.
     pub rear_edges_from_image: bool,
     /// Reconstructed features closer than this in 3-D belong to one object (the thesis's
     /// "3-D connected component"; the planner's own components need a junction seen in both

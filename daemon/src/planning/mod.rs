@@ -41,6 +41,10 @@ pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
 /// the same object, in both views, is that face reconstructed off (see [`plan`]).
 pub const SUPERSEDED_SHARE: f64 = 0.6;
 
+/// Grasps narrower than this near the indicated point send the plan looking for rear edges
+/// in the images (see [`plan`]), m.
+pub const MIN_SOLID_WIDTH_M: f64 = 0.005;
+
 /// `PlannedScene::edge_matches` entry of a rear edge found in the images (no planner match).
 pub const IMAGE_REAR_EDGE: usize = usize::MAX;
 
@@ -449,12 +453,13 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images };
         }
     };
-    // No site near the point: look in the images for the rear edges behind the vertical
-    // faces there (see `rear_edges_from_image`) and plan again.
+    // No site near the point, or only zero-width ones (the thesis's thin wall; among
+    // blocks, a top face the planner missed): look in the images for the rear edges behind
+    // the vertical faces there (see `rear_edges_from_image`) and plan again.
     let near_point = |g: &Grasp, p: &Vector3<f64>| (g.site.centre_m.xy() - p.xy()).norm() <= req.max_distance_m;
     if req.rear_edges_from_image
         && let Some(p) = indicated
-        && !grasps.candidates.iter().any(|g| near_point(g, &p))
+        && !grasps.candidates.iter().any(|g| near_point(g, &p) && g.site.width_m >= MIN_SOLID_WIDTH_M)
     {
         let project = |q: &Vector3<f64>| project_scene(&geo, &req.model, &req.lever_m, q);
         let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.max_distance_m, &mut summary);
