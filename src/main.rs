@@ -37,11 +37,11 @@ enum Command {
     Snapshot(cli::snapshot::SnapshotArgs),
     /// Run the hard-loop daemon against whatever publishes on the services.
     Daemon(cli::daemon::DaemonArgs),
-    /// Run one closed-loop grasp scenario: simulator and daemon as two processes.
+    // `run` and `batch` take their help (summary, details, examples) from their argument
+    // structs' doc comments: a doc comment here would replace it.
     Run(cli::run::RunArgs),
     /// Find planar facets in one stereo pair: polygons in both views, 3-D corners.
     Plan(cli::plan::PlanArgs),
-    /// Run many closed-loop scenarios and report the success rate.
     Batch(cli::batch::BatchArgs),
     /// Measure handeye's parts: transport, tracker, render, planner, loop.
     Bench(cli::bench::BenchArgs),

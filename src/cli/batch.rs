@@ -18,9 +18,9 @@ use serde_json::{json, Value};
 ///
 /// Each run is `handeye run SCENARIO --seed S --random-layout --json` (simulator and daemon
 /// as two processes in their own private shared-memory domain): seed S lays the
-/// scenario's blocks out at random (positions in x 0.27..0.45 m (the whole block), y -0.15..0.15 m, any yaw,
-/// 60 mm apart; a task with an indicated point gets a random target with the point within
-/// 15 mm of it) and reseeds the sensor noise. The daemon plans its own grasp (with --hint:
+/// scenario's blocks out at random (positions in x 0.27..0.45 m with the whole block
+/// inside, y -0.15..0.15 m, any yaw, 60 mm apart; a task with an indicated point gets a
+/// random target with the point within 15 mm of it) and reseeds the sensor noise. The daemon plans its own grasp (with --hint:
 /// the operator hint), and the simulator judges success from ground truth: the task's
 /// target lifted 50 mm and held 2 s.
 ///
@@ -46,6 +46,7 @@ use serde_json::{json, Value};
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
 #[derive(Args)]
+#[command(verbatim_doc_comment)]
 pub struct BatchArgs {
     /// A scenario file (TOML), or a folder: every `*.toml` in it, in name order.
     scenarios: PathBuf,

@@ -53,6 +53,7 @@ use serde_json::{json, Value};
 ///   handeye run scenarios/pick_cube.toml --seed 7 --json
 ///   handeye run scenarios/pick_cube_bump.toml --hint --out out/bump
 #[derive(Args)]
+#[command(verbatim_doc_comment)]
 pub struct RunArgs {
     /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
     scenario: PathBuf,

@@ -64,8 +64,8 @@ pub struct SimArgs {
     #[arg(long)]
     seed: Option<u64>,
     /// With --seed: a random layout of all the scenario's blocks instead (positions in
-    /// x 0.27..0.45 m (the whole block), y -0.15..0.15 m, any yaw, at least 60 mm between their bounding
-    /// circles; kinds, sizes and shades as written). A task with an indicated point gets a
+    /// x 0.27..0.45 m with the whole block inside, y -0.15..0.15 m, any yaw, at least 60 mm
+    /// between their bounding circles; kinds, sizes and shades as written). A task with an indicated point gets a
     /// random target and the point within 15 mm of it. What `handeye batch` runs.
     #[arg(long, requires = "seed")]
     random_layout: bool,
