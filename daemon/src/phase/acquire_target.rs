@@ -91,7 +91,7 @@ impl AcquireTarget {
             // The servo will need the safety's score; the arm is still until then, so a shaky
             // tracker is judged here, at the end, rather than stopping the run on its way in.
             let min = m.cfg.target.min_score.max(m.cfg.safety.min_target_score);
-            if !(score >= min) {
+            if score.is_nan() || score < min {
                 return Step::Fail(format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {min}"));
             }
         }

@@ -306,12 +306,12 @@ fn rear_edges_from_image(
         ps.edge_matches.push(IMAGE_REAR_EDGE);
         let left: Vec<[f64; 2]> = top_face.iter().map(|p| [p[0][0] + PLANNER_FROM_TRACKER_PX, p[0][1] + PLANNER_FROM_TRACKER_PX]).collect();
         let right: Vec<[f64; 2]> = top_face.iter().map(|p| [p[1][0] + PLANNER_FROM_TRACKER_PX, p[1][1] + PLANNER_FROM_TRACKER_PX]).collect();
-        for j in 0..ps.facets.len() {
+        for (j, (src, facet)) in ps.facets.iter().zip(&ps.scene.facets).enumerate() {
             if j != k
-                && !ps.facets[j].hypothesised
-                && ps.scene.facets[j].component == component
-                && pixels::covered_share(&ps.facets[j].left_px, &left) >= SUPERSEDED_SHARE
-                && pixels::covered_share(&ps.facets[j].right_px, &right) >= SUPERSEDED_SHARE
+                && !src.hypothesised
+                && facet.component == component
+                && pixels::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
+                && pixels::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
             {
                 drop[j] = true;
             }

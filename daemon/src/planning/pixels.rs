@@ -166,7 +166,7 @@ pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> u
 pub fn edge_support(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len = dx.hypot(dy);
-    if !(len >= 4.0) {
+    if len.is_nan() || len < 4.0 {
         return 0.0;
     }
     let (nx, ny) = (-dy / len, dx / len);
