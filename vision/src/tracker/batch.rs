@@ -226,14 +226,18 @@ fn plan_and_gather(
     // The base pixel, whether the line lies inside the image, the base pixel's normal offset
     // from the point and the window of offsets within ±search_px (the operations of
     // line-by-line search, lane by lane).
-    let (mut ok, mut base_x, mut base_y, mut o_lo, mut o_hi) = ([false; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    let mut ok = [false; LANES];
+    // The window's first and last rows and where its first gathered sample lies in the image,
+    // converted here for all lanes at once (whole numbers, exact in f64; nonsense but
+    // harmless in a lane that is not `ok`).
+    let (mut row_lo, mut row_hi, mut start_at) = ([0i32; LANES], [0i32; LANES], [0i64; LANES]);
+    let stride_f = stride as f64;
     let pad = PAD as f64;
     for l in 0..LANES {
         // Also false for NaN.
         let finite = x[l].abs() <= 1e8 && y[l].abs() <= 1e8;
         let (px, py) = if finite { (x[l], y[l]) } else { (0.0, 0.0) };
         let (bx, by) = ((px + 0.5).floor(), (py + 0.5).floor());
-        (base_x[l], base_y[l]) = (bx, by);
         let (along, across, along_size, across_size) =
             if horizontal[l] { (bx, by, w, h) } else { (by, bx, h, w) };
         let inside = across >= 0.0 && across < across_size && along - reach[l] >= 0.0 && along + reach[l] < along_size;
@@ -243,8 +247,11 @@ fn plan_and_gather(
         let hi = k_a.max(k_b).floor().min(reach[l] - pad);
         ok[l] = finite & inside;
         lanes.outside[l] = !(finite & inside);
-        (o_lo[l], o_hi[l]) = (lo, hi);
         ok[l] &= lo <= hi;
+        (row_lo[l], row_hi[l]) = ((ORIGIN as f64 + lo) as i32, (ORIGIN as f64 + hi) as i32);
+        // The first gathered sample is three before the window's first.
+        let step = if horizontal[l] { 1.0 } else { stride_f };
+        start_at[l] = (by * stride_f + bx + (lo - 3.0) * step) as i64;
         lanes.h0[l] = h0 as f32;
         lanes.step_h[l] = n_axis[l] as f32;
     }
@@ -253,7 +260,7 @@ fn plan_and_gather(
         if !ok[l] {
             continue;
         }
-        let (r_lo, r_hi) = (ORIGIN + o_lo[l] as isize, ORIGIN + o_hi[l] as isize);
+        let (r_lo, r_hi) = (row_lo[l] as isize, row_hi[l] as isize);
         lanes.lo[l] = r_lo as i16;
         lanes.hi[l] = r_hi as i16;
         // The window's samples and three more at each end (a peak reads three either side).
@@ -261,7 +268,7 @@ fn plan_and_gather(
         gathered_lo = gathered_lo.min(g_lo);
         gathered_hi = gathered_hi.max(g_hi);
         let step = if horizontal[l] { 1 } else { stride };
-        let start = base_y[l] as isize * stride + base_x[l] as isize + (g_lo as isize - ORIGIN) * step;
+        let start = start_at[l] as isize;
         let samples = g_hi - g_lo + 1;
         // The line lies inside the image (checked above), and these samples inside the line.
         assert!(start >= 0 && (start as usize + (samples - 1) * step as usize) < data.len(), "search line outside the image");
