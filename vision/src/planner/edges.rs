@@ -30,6 +30,7 @@
 //! assert!((p.x - 10.0).abs() < 0.05);
 //! ```
 
+use crate::cpu::has_avx2;
 use crate::image::ImageView;
 
 /// Thresholds on the gradient magnitude, in grey levels per pixel (of the smoothed image).
@@ -359,14 +360,6 @@ impl EdgeDetector {
             }
         }
     }
-}
-
-/// Whether the processor has AVX2 (checked once, when a detector is made).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    return false;
 }
 
 #[cfg(test)]

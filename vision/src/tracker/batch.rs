@@ -27,6 +27,7 @@
 //! (`batch_tests.rs` compares them on random images, geometries and polarity rules, on both
 //! vector paths).
 
+use crate::cpu::has_avx2;
 use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule, MAX_CANDIDATES, MAX_HALF, PAD};
 use super::simd::F32x4;
 use crate::image::ImageView;
@@ -629,14 +630,6 @@ fn refine(
             }
         }
     }
-}
-
-/// Whether the processor has AVX2 (checked once per search, when it is made).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    return false;
 }
 
 #[cfg(test)]

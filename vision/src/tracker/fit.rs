@@ -8,6 +8,7 @@
 //! (`Σw, Σw p, Σw p pᵀ, Σw h, Σw h p`) instead of an outer product per point, and the
 //! predicted offset along a side is `α + β·p`: a few flops per point and iteration.
 
+use crate::cpu::has_avx2;
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 use super::search::{Candidate, MAX_CANDIDATES};
@@ -679,14 +680,6 @@ fn result(theta: &Vec8) -> FitResult {
         a: Matrix2::new(theta[2], theta[3], theta[4], theta[5]),
         g: Vector2::new(theta[6], theta[7]),
     }
-}
-
-/// Whether the processor has AVX2 (checked once per tracker, when its buffers are made).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    return false;
 }
 
 /// The working arrays are padded to a multiple of this many points (the widest loop).
