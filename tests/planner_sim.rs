@@ -217,18 +217,7 @@ fn diag_overlays() {
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     let snaps = snapshots(&dir, env("N").unwrap_or(10.0) as u64);
     let quiet = env("QUIET").is_some();
-    let mut cfg = PlannerConfig::default();
-    if let Some(v) = env("EDGE_LOW") { cfg.edges.low_grad = v as f32; }
-    if let Some(v) = env("EDGE_HIGH") { cfg.edges.high_grad = v as f32; }
-    if let Some(v) = env("EPI_TOL") { cfg.matching.epipolar_tol_px = v; }
-    if let Some(v) = env("LINE_TOL") { cfg.planes.line_tol_px = v; }
-    if let Some(v) = env("BOOT") { cfg.bootstrap_rounds = v as usize; }
-    if let Some(v) = env("FLIP") { cfg.matching.allow_flipped = v > 0.0; }
-    if let Some(v) = env("JMIN") { cfg.relations.junction_gap_min_px = v; }
-    if let Some(v) = env("JREL") { cfg.relations.junction_gap_rel = v; }
-    if let Some(v) = env("JGAP") { cfg.relations.junction_gap_px = v; }
-    if let Some(v) = env("MINSEG") { cfg.facets.min_segments = v as usize; }
-    if let Some(v) = env("TOUCH") { cfg.facets.touch_px = v; }
+    let cfg = config_from_env();
     let margin = env("DISP_MARGIN").unwrap_or(0.5);
     let mut planner = Planner::new(cfg);
     let (mut c, mut f, mut sp) = (0, 0, 0);
@@ -258,12 +247,7 @@ fn diag_trace() {
     std::fs::create_dir_all(&dir).unwrap();
     let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(10));
     let only = std::env::var("SCENE").ok();
-    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
-    let mut cfg = PlannerConfig::default();
-    if let Some(v) = env("EDGE_LOW") { cfg.edges.low_grad = v as f32; }
-    if let Some(v) = env("EDGE_HIGH") { cfg.edges.high_grad = v as f32; }
-    if let Some(v) = env("EPI_TOL") { cfg.matching.epipolar_tol_px = v; }
-    let mut planner = Planner::new(cfg);
+    let mut planner = Planner::new(config_from_env());
     for snap in snaps.iter().filter(|s| only.as_ref().is_none_or(|o| &s.name == o)) {
         let geo = snap.geometry(0.5, 10.0);
         let plan = planner.plan(&snap.left.view(), &snap.right.view(), &geo);
@@ -355,17 +339,7 @@ fn diag_face() {
     let snaps = snapshots(&dir, std::env::var("N").ok().and_then(|v| v.parse().ok()).unwrap_or(40));
     let scene = std::env::var("SCENE").unwrap();
     let label = std::env::var("FACE").unwrap();
-    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
-    let mut cfg = PlannerConfig::default();
-    if let Some(v) = env("EPI_TOL") { cfg.matching.epipolar_tol_px = v; }
-    if let Some(v) = env("BOOT") { cfg.bootstrap_rounds = v as usize; }
-    if let Some(v) = env("FLIP") { cfg.matching.allow_flipped = v > 0.0; }
-    if let Some(v) = env("JMIN") { cfg.relations.junction_gap_min_px = v; }
-    if let Some(v) = env("JREL") { cfg.relations.junction_gap_rel = v; }
-    if let Some(v) = env("JGAP") { cfg.relations.junction_gap_px = v; }
-    if let Some(v) = env("MINSEG") { cfg.facets.min_segments = v as usize; }
-    if let Some(v) = env("TOUCH") { cfg.facets.touch_px = v; }
-    let mut planner = Planner::new(cfg);
+    let mut planner = Planner::new(config_from_env());
     let snap = snaps.iter().find(|s| s.name == scene).unwrap();
     let plan = planner.plan(&snap.left.view(), &snap.right.view(), &snap.geometry(0.5, 10.0));
     let ef = handeye_vision::planner::matching::EpipolarFrame::new(&plan.epipolar);

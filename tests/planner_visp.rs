@@ -13,7 +13,7 @@ use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::edges::{EdgeConfig, EdgeDetector};
 use handeye_vision::planner::geom::{self, P2};
 use handeye_vision::planner::segments::{SegmentConfig, SegmentDetector};
-use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
+use handeye_vision::planner::{Plan, Planner, PlannerConfig, StereoGeometry};
 use serde_json::Value;
 
 fn data_dir() -> Option<PathBuf> {
@@ -75,14 +75,29 @@ fn area_inside(a: &[P2], b: &[P2]) -> f64 {
     n as f64 * 0.25
 }
 
-#[test]
-fn frames_0_and_40_give_the_three_faces_as_three_distinct_planes() {
-    let Some(dir) = data_dir() else { return };
+/// The pair 0/40 as planned: the faces annotated in both frames, the left image and the plan.
+struct Pair0And40 {
+    f0: Vec<Vec<P2>>,
+    f40: Vec<Vec<P2>>,
+    left: ImageBuf,
+    plan: Plan,
+}
+
+/// The planner on frames 0 and 40, the epipolar constraint fitted from the faces annotated
+/// in both; `None` when the data is absent.
+fn plan_frames_0_and_40() -> Option<Pair0And40> {
+    let dir = data_dir()?;
     let f0 = faces(&json(&dir.join("faces-frame0.json")));
     let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
     let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
     let (left, right) = (load(&dir.join("image0000.png")), load(&dir.join("image0040.png")));
     let plan = Planner::new(PlannerConfig::default()).plan(&left.view(), &right.view(), &geo);
+    Some(Pair0And40 { f0, f40, left, plan })
+}
+
+#[test]
+fn frames_0_and_40_give_the_three_faces_as_three_distinct_planes() {
+    let Some(Pair0And40 { f0, f40, plan, .. }) = plan_frames_0_and_40() else { return };
 
     // Per face: the facet that covers most of it while lying mostly on it (near a crease the
     // parallax between two faces is below the line tolerance, so a facet may reach a little
@@ -161,12 +176,7 @@ fn frames_0_and_20_have_no_parallax_so_no_stereo_geometry() {
 #[test]
 #[ignore]
 fn diag_frames_0_and_40() {
-    let Some(dir) = data_dir() else { return };
-    let f0 = faces(&json(&dir.join("faces-frame0.json")));
-    let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
-    let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
-    let (left, right) = (load(&dir.join("image0000.png")), load(&dir.join("image0040.png")));
-    let plan = Planner::new(PlannerConfig::default()).plan(&left.view(), &right.view(), &geo);
+    let Some(Pair0And40 { f0, left, plan, .. }) = plan_frames_0_and_40() else { return };
     eprintln!("bootstrap {:?}", plan.bootstrap);
     for (k, f) in f0.iter().enumerate() {
         eprintln!("face {} area {:.0}", FACES[k], geom::area(f));

@@ -445,15 +445,26 @@ fn corner_shows(snap: &Snapshot, ids: &[FaceIds; 2], face: usize, corner: [f64; 
     })
 }
 
-/// Median; `None` when empty.
-pub fn median(v: &[f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    Some(if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) })
+/// Median; `None` when empty (the scorer's, so tests and the library agree).
+pub use handeye_vision::planner::score::median;
+
+/// The planner configuration with the diagnostics' overrides from the environment
+/// (EDGE_LOW, EDGE_HIGH, EPI_TOL, LINE_TOL, BOOT, FLIP, JMIN, JREL, JGAP, MINSEG, TOUCH).
+pub fn config_from_env() -> handeye_vision::planner::PlannerConfig {
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    let mut cfg = handeye_vision::planner::PlannerConfig::default();
+    if let Some(v) = env("EDGE_LOW") { cfg.edges.low_grad = v as f32; }
+    if let Some(v) = env("EDGE_HIGH") { cfg.edges.high_grad = v as f32; }
+    if let Some(v) = env("EPI_TOL") { cfg.matching.epipolar_tol_px = v; }
+    if let Some(v) = env("LINE_TOL") { cfg.planes.line_tol_px = v; }
+    if let Some(v) = env("BOOT") { cfg.bootstrap_rounds = v as usize; }
+    if let Some(v) = env("FLIP") { cfg.matching.allow_flipped = v > 0.0; }
+    if let Some(v) = env("JMIN") { cfg.relations.junction_gap_min_px = v; }
+    if let Some(v) = env("JREL") { cfg.relations.junction_gap_rel = v; }
+    if let Some(v) = env("JGAP") { cfg.relations.junction_gap_px = v; }
+    if let Some(v) = env("MINSEG") { cfg.facets.min_segments = v as usize; }
+    if let Some(v) = env("TOUCH") { cfg.facets.touch_px = v; }
+    cfg
 }
 
 /// One line per scene, then one per missed face and per spurious facet.

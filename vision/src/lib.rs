@@ -2,6 +2,7 @@
 //! arguments), so every algorithm can be tested on synthetic images with exact ground truth.
 
 pub mod affine;
+mod cpu;
 pub mod grasp;
 pub mod image;
 pub mod locate;

@@ -6,7 +6,6 @@
 use std::marker::PhantomData;
 use std::time::{Duration, Instant};
 
-use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory;
@@ -15,7 +14,7 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFac
 use thiserror::Error;
 
 use crate::domain::WireNode;
-use crate::liveness::{is_lifecycle_event, Liveness, LivenessChange, RateLimitedLog};
+use crate::liveness::{Liveness, LivenessChange, RateLimitedLog};
 use crate::services::{
     event_id, open_event_service, open_message_service, OpenError, ServiceSizing, ROBOT_COMMAND_SIZING, ROBOT_STATE_SIZING,
     TELEMETRY_SIZING,

@@ -6,21 +6,28 @@
 //! in blocks of [`LANES`], whatever side they belong to. Each line's samples are copied into
 //! one row of a buffer (a memory copy for a line along an image row, a gather for a column),
 //! the buffer is transposed (SSE2 byte shuffles) so that table row `r` holds every lane's
-//! sample `r − ORIGIN` steps from its base pixel, and then every step runs table row by table
-//! row on all sixteen lanes at once with lane-wise arithmetic the compiler vectorises (AVX2
-//! where the processor has it, SSE2 otherwise):
+//! sample `r − ORIGIN` steps from its base pixel, and then one sweep over the window rows
+//! runs on all sixteen lanes at once with lane-wise arithmetic the compiler vectorises (AVX2
+//! where the processor has it, SSE2 otherwise), each row's values kept in registers for the
+//! next:
 //! - the central difference `D = S[r+1] − S[r−1]` and the score of the lane's polarity;
 //! - the peak flags (`score >= min_contrast`, `>` the previous row's, `>=` the next one's);
 //! - the grey levels 2-3 samples either side (rounded means);
 //! - the strongest four peaks of each lane's window, by a max/min insertion network over
-//!   16-bit keys `score << 7 | (127 − row)` (the earlier row first among equals);
+//!   16-bit keys `score << 7 | (127 − row)` (the earlier row first among equals), fed row by
+//!   row as the keys are made (no table of keys, no second sweep);
 //! - then, per kept peak, five loads from the tables, and the sub-pixel step of all of them
 //!   four at a time.
+//!
+//! Helpers on this path are plain `#[inline(always)]` functions, not closures: a closure is
+//! not inlined into the AVX2 copy and runs as a scalar call per row (measured: 10 % more
+//! instructions for the whole tracker).
 //!
 //! It computes exactly what the line-by-line search does, candidate for candidate, bit for bit
 //! (`batch_tests.rs` compares them on random images, geometries and polarity rules, on both
 //! vector paths).
 
+use crate::cpu::has_avx2;
 use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule, MAX_CANDIDATES, MAX_HALF, PAD};
 use super::simd::F32x4;
 use crate::image::ImageView;
@@ -52,13 +59,12 @@ struct Tables {
     lines: [[u8; ROWS]; LANES],
     /// The same transposed: `t[r][l]`.
     t: [RowU8; ROWS],
-    /// Central differences `t[r+1] − t[r−1]`.
+    /// Central differences `t[r+1] − t[r−1]` of the window rows and one more either side,
+    /// written as the strongest four are chosen (the peak keys live in registers only).
     d: [RowI16; ROWS],
     /// The lane's score of that difference: `|D|`, `D` or `−D`.
     s: [RowI16; ROWS],
-    /// Peak keys (0: no peak at this row).
-    k: [RowI16; ROWS],
-    /// Rounded means of the samples 2 and 3 rows up, and 2 and 3 rows down.
+    /// Rounded means of the samples 2 and 3 rows up, and 2 and 3 rows down (window rows).
     up: [RowU8; ROWS],
     down: [RowU8; ROWS],
 }
@@ -141,7 +147,6 @@ impl ContourSearch {
             t: [[0; LANES]; ROWS],
             d: [[0; LANES]; ROWS],
             s: [[0; LANES]; ROWS],
-            k: [[0; LANES]; ROWS],
             up: [[0; LANES]; ROWS],
             down: [[0; LANES]; ROWS],
         });
@@ -228,14 +233,18 @@ fn plan_and_gather(
     // The base pixel, whether the line lies inside the image, the base pixel's normal offset
     // from the point and the window of offsets within ±search_px (the operations of
     // line-by-line search, lane by lane).
-    let (mut ok, mut base_x, mut base_y, mut o_lo, mut o_hi) = ([false; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    let mut ok = [false; LANES];
+    // The window's first and last rows and where its first gathered sample lies in the image,
+    // converted here for all lanes at once (whole numbers, exact in f64; nonsense but
+    // harmless in a lane that is not `ok`).
+    let (mut row_lo, mut row_hi, mut start_at) = ([0i32; LANES], [0i32; LANES], [0i64; LANES]);
+    let stride_f = stride as f64;
     let pad = PAD as f64;
     for l in 0..LANES {
         // Also false for NaN.
         let finite = x[l].abs() <= 1e8 && y[l].abs() <= 1e8;
         let (px, py) = if finite { (x[l], y[l]) } else { (0.0, 0.0) };
         let (bx, by) = ((px + 0.5).floor(), (py + 0.5).floor());
-        (base_x[l], base_y[l]) = (bx, by);
         let (along, across, along_size, across_size) =
             if horizontal[l] { (bx, by, w, h) } else { (by, bx, h, w) };
         let inside = across >= 0.0 && across < across_size && along - reach[l] >= 0.0 && along + reach[l] < along_size;
@@ -245,8 +254,11 @@ fn plan_and_gather(
         let hi = k_a.max(k_b).floor().min(reach[l] - pad);
         ok[l] = finite & inside;
         lanes.outside[l] = !(finite & inside);
-        (o_lo[l], o_hi[l]) = (lo, hi);
         ok[l] &= lo <= hi;
+        (row_lo[l], row_hi[l]) = ((ORIGIN as f64 + lo) as i32, (ORIGIN as f64 + hi) as i32);
+        // The first gathered sample is three before the window's first.
+        let step = if horizontal[l] { 1.0 } else { stride_f };
+        start_at[l] = (by * stride_f + bx + (lo - 3.0) * step) as i64;
         lanes.h0[l] = h0 as f32;
         lanes.step_h[l] = n_axis[l] as f32;
     }
@@ -255,7 +267,7 @@ fn plan_and_gather(
         if !ok[l] {
             continue;
         }
-        let (r_lo, r_hi) = (ORIGIN + o_lo[l] as isize, ORIGIN + o_hi[l] as isize);
+        let (r_lo, r_hi) = (row_lo[l] as isize, row_hi[l] as isize);
         lanes.lo[l] = r_lo as i16;
         lanes.hi[l] = r_hi as i16;
         // The window's samples and three more at each end (a peak reads three either side).
@@ -263,7 +275,7 @@ fn plan_and_gather(
         gathered_lo = gathered_lo.min(g_lo);
         gathered_hi = gathered_hi.max(g_hi);
         let step = if horizontal[l] { 1 } else { stride };
-        let start = base_y[l] as isize * stride + base_x[l] as isize + (g_lo as isize - ORIGIN) * step;
+        let start = start_at[l] as isize;
         let samples = g_hi - g_lo + 1;
         // The line lies inside the image (checked above), and these samples inside the line.
         assert!(start >= 0 && (start as usize + (samples - 1) * step as usize) < data.len(), "search line outside the image");
@@ -344,8 +356,7 @@ fn block(
         plan_and_gather(input.image, input.sides, input.side_of, input.xs, input.ys, input.first, settings, tables, lanes);
     let top = if g_lo <= g_hi {
         transpose(tables, g_lo, g_hi);
-        scan(tables, lanes, g_lo + 2, g_hi - 2, settings.min_contrast);
-        strongest(tables, lanes)
+        strongest(tables, lanes, settings.min_contrast)
     } else {
         [[0; LANES]; MAX_CANDIDATES]
     };
@@ -398,71 +409,81 @@ fn transpose(tables: &mut Tables, lo: usize, hi: usize) {
 #[cfg(target_arch = "x86_64")]
 const BIT_REVERSE_4: [usize; 16] = [0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15];
 
-/// Differences, scores and grey means of the rows `lo − 1..=hi + 1`, and the peak keys of
-/// `lo..=hi` (all lanes).
+/// Per lane, the masks that turn a difference `D` into the lane's score `(D ^ m) − m`: `m`
+/// all ones where D is negated (its sign for either polarity, or −1 for the negative one)
+/// and 0 where it is kept. Returns `(neg, either)`; `m = (D >> 15 & either) | neg`.
 #[inline(always)]
-fn scan(tables: &mut Tables, lanes: &Lanes, lo: usize, hi: usize, min_contrast: i32) {
-    if lo > hi {
-        return;
-    }
-    assert!(lo >= 3 && hi + 3 < ROWS, "scanned rows within the tables");
-    // Score of a difference: `(D ^ m) − m`, with `m` all ones where D is negated (its sign
-    // for either polarity, or −1 for the negative one) and 0 where it is kept.
-    let mut neg = [0i16; LANES];
-    let mut either = [0i16; LANES];
+fn score_masks(lanes: &Lanes) -> (RowI16, RowI16) {
+    let (mut neg, mut either) = ([0i16; LANES], [0i16; LANES]);
     for l in 0..LANES {
         neg[l] = -((lanes.mode[l] < 0) as i16);
         either[l] = -((lanes.mode[l] == 0) as i16);
     }
-    for r in lo - 1..=hi + 1 {
-        let (before, after) = (&tables.t[r - 1], &tables.t[r + 1]);
-        let (mut d, mut s) = ([0i16; LANES], [0i16; LANES]);
-        for l in 0..LANES {
-            d[l] = after[l] as i16 - before[l] as i16;
-            let m = (d[l] >> 15 & either[l]) | neg[l];
-            s[l] = (d[l] ^ m).wrapping_sub(m);
-        }
-        tables.d[r] = d;
-        tables.s[r] = s;
-    }
-    // Scores reach 255 at most: a threshold above that finds nothing, as it should. A
-    // negative one-sided score can be no peak's neighbour that matters: a peak scores >= 1.
-    let below = min_contrast.clamp(1, 256) as i16 - 1;
-    for r in lo..=hi {
-        let (prev, here, next) = (&tables.s[r - 1], &tables.s[r], &tables.s[r + 1]);
-        let tag = 127 - r as i16;
-        let mut key = [0i16; LANES];
-        for l in 0..LANES {
-            let peak = -((here[l] > below) as i16) & -((here[l] > prev[l]) as i16) & !-((next[l] > here[l]) as i16);
-            key[l] = peak & (here[l] << 7 | tag);
-        }
-        tables.k[r] = key;
-        let (u2, u3, d2, d3) = (&tables.t[r + 2], &tables.t[r + 3], &tables.t[r - 2], &tables.t[r - 3]);
-        let (mut up, mut down) = ([0u8; LANES], [0u8; LANES]);
-        for l in 0..LANES {
-            up[l] = ((u2[l] as u16 + u3[l] as u16 + 1) >> 1) as u8;
-            down[l] = ((d2[l] as u16 + d3[l] as u16 + 1) >> 1) as u8;
-        }
-        tables.up[r] = up;
-        tables.down[r] = down;
-    }
+    (neg, either)
 }
 
-/// The strongest four peak keys of each lane's window, strongest first (0: none).
+/// The lanes' scores of the central differences `after − before` (table rows `r + 1` and
+/// `r − 1` for row `r`).
 #[inline(always)]
-fn strongest(tables: &Tables, lanes: &Lanes) -> [[i16; LANES]; MAX_CANDIDATES] {
+fn scores(before: &RowU8, after: &RowU8, neg: &RowI16, either: &RowI16) -> (RowI16, RowI16) {
+    let (mut d, mut s) = ([0i16; LANES], [0i16; LANES]);
+    for l in 0..LANES {
+        d[l] = after[l] as i16 - before[l] as i16;
+        let m = (d[l] >> 15 & either[l]) | neg[l];
+        s[l] = (d[l] ^ m).wrapping_sub(m);
+    }
+    (d, s)
+}
+
+/// Row `r`'s differences and scores, also into the tables (for the kept peaks' sub-pixel
+/// step). A plain function, not a closure: it must inline into the AVX2 path.
+#[inline(always)]
+fn row_scores(tables: &mut Tables, r: usize, neg: &RowI16, either: &RowI16) -> RowI16 {
+    let (d, s) = scores(&tables.t[r - 1], &tables.t[r + 1], neg, either);
+    (tables.d[r], tables.s[r]) = (d, s);
+    s
+}
+
+/// The strongest four peaks of each lane's window, strongest first, as keys
+/// `score << 7 | (127 − row)` (the earlier row first among equals; 0: none). One sweep over
+/// the window rows of all lanes: each row's scores come from the samples either side, a row
+/// is a peak where its score is at least `min_contrast`, above the previous row's and not
+/// below the next one's, and its key goes through a max/min insertion network.
+#[inline(always)]
+fn strongest(tables: &mut Tables, lanes: &Lanes, min_contrast: i32) -> [[i16; LANES]; MAX_CANDIDATES] {
     let mut top = [[0i16; LANES]; MAX_CANDIDATES];
     let (mut lo, mut hi) = (NO_ROW_LO, NO_ROW_HI);
     for l in 0..LANES {
         lo = lo.min(lanes.lo[l]);
         hi = hi.max(lanes.hi[l]);
     }
+    if lo > hi {
+        return top;
+    }
+    let (lo, hi) = (lo as usize, hi as usize);
+    // A window row's neighbours' scores and its grey levels read three rows either side.
+    assert!(lo >= 3 && hi + 3 < ROWS, "window rows within the tables");
+    let (neg, either) = score_masks(lanes);
+    // Scores reach 255 at most: a threshold above that finds nothing, as it should. A
+    // negative one-sided score can be no peak's neighbour that matters: a peak scores >= 1.
+    let below = min_contrast.clamp(1, 256) as i16 - 1;
+    let mut prev = row_scores(tables, lo - 1, &neg, &either);
+    let mut here = row_scores(tables, lo, &neg, &either);
     for r in lo..=hi {
-        let row = &tables.k[r as usize];
+        let next = row_scores(tables, r + 1, &neg, &either);
+        let (u2, u3, d2, d3) = (&tables.t[r + 2], &tables.t[r + 3], &tables.t[r - 2], &tables.t[r - 3]);
+        let (mut up, mut down) = ([0u8; LANES], [0u8; LANES]);
+        for l in 0..LANES {
+            up[l] = ((u2[l] as u16 + u3[l] as u16 + 1) >> 1) as u8;
+            down[l] = ((d2[l] as u16 + d3[l] as u16 + 1) >> 1) as u8;
+        }
+        (tables.up[r], tables.down[r]) = (up, down);
+        let (row, tag) = (r as i16, 127 - r as i16);
         let mut key = [0i16; LANES];
         for l in 0..LANES {
-            let inside = -((r >= lanes.lo[l]) as i16) & -((r <= lanes.hi[l]) as i16);
-            key[l] = row[l] & inside;
+            let peak = -((here[l] > below) as i16) & -((here[l] > prev[l]) as i16) & !-((next[l] > here[l]) as i16);
+            let inside = -((row >= lanes.lo[l]) as i16) & -((row <= lanes.hi[l]) as i16);
+            key[l] = peak & inside & (here[l] << 7 | tag);
         }
         for slot in &mut top {
             for l in 0..LANES {
@@ -471,6 +492,7 @@ fn strongest(tables: &Tables, lanes: &Lanes) -> [[i16; LANES]; MAX_CANDIDATES] {
                 slot[l] = better;
             }
         }
+        (prev, here) = (here, next);
     }
     top
 }
@@ -608,14 +630,6 @@ fn refine(
             }
         }
     }
-}
-
-/// Whether the processor has AVX2 (checked once per search, when it is made).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    return false;
 }
 
 #[cfg(test)]

@@ -3,7 +3,6 @@
 
 use std::time::{Duration, Instant};
 
-use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
@@ -13,7 +12,7 @@ use thiserror::Error;
 use super::publisher::open_stereo_service;
 use super::{validate_stereo, StereoLayout, StereoReject};
 use crate::domain::WireNode;
-use crate::liveness::{is_lifecycle_event, Liveness, LivenessChange, RateLimitedLog};
+use crate::liveness::{Liveness, LivenessChange, RateLimitedLog};
 use crate::services::{open_event_service, OpenError, STEREO_SIZING};
 use crate::types::{monotonic_ns, service, StereoHeader};
 
