@@ -181,8 +181,8 @@ pub fn scenario_toml(base: &str, name: &str, seed: u64, blocks: &[BlockLayout], 
     doc.insert("description".into(), toml::Value::String(format!("random layout, seed {seed}")));
     doc.insert("seed".into(), toml::Value::Integer(seed as i64));
     doc.remove("events");
-    // Rendered as a camera sees edges (a pixel an edge crosses takes the mixed grey), as the
-    // pick scenarios are; clutter3 predates the option.
+    // Rendered as a camera sees edges (a pixel an edge crosses takes the mixed grey), or
+    // aliased for diagnosis.
     let render = doc.get_mut("render").and_then(|r| r.as_table_mut()).expect("[render]");
     render.insert("antialias".into(), toml::Value::Boolean(antialias));
     let arr: Vec<toml::Value> = blocks
