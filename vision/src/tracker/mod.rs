@@ -54,8 +54,9 @@
 //!   same order (tests compare them bit for bit), and a portable fallback serves other
 //!   processors; the tracker's results do not depend on the path taken.
 //! - What does not help: fewer points in the wide pass (`coarse_stride`), a short search
-//!   first (`short_first_px`), one pass, or fewer reweighting iterations all lose the real
-//!   top face markedly more often (numbers at those settings and in `BENCHMARKS.md`).
+//!   first (`short_first_px`), one pass, fewer reweighting iterations, a refinement pass on
+//!   the first pass's pixel lines or on half the points all lose the real top face markedly
+//!   more often (numbers at those settings and in `BENCHMARKS.md`, Tracker rounds 2-4).
 
 mod batch;
 mod config;
