@@ -64,9 +64,11 @@ pub struct SimArgs {
     #[arg(long)]
     seed: Option<u64>,
     /// With --seed: a random layout of all the scenario's blocks instead (positions in
-    /// x 0.27..0.45 m with the whole block inside, y -0.15..0.15 m, any yaw, at least 60 mm
-    /// between their bounding circles; kinds, sizes and shades as written). A task with an indicated point gets a
-    /// random target and the point within 15 mm of it. What `handeye batch` runs.
+    /// x 0.27..0.45 m with the whole block inside, y -0.15..0.15 m, at least 60 mm
+    /// between their bounding circles; kinds, sizes and shades as written; any yaw at which
+    /// every edge the cameras see shows by 12 grey levels or more under the scenario's light).
+    /// A task with an indicated point gets a random target and the point within 15 mm of it.
+    /// What `handeye batch` runs.
     #[arg(long, requires = "seed")]
     random_layout: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
