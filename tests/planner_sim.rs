@@ -16,6 +16,10 @@
 //! - Corners: per corner of a found face that shows in both views, the distance to the
 //!   nearest reconstructed corner of its facet, robot frame.
 //!
+//! The same layouts are also measured under clutter3's own dark table, the closed loop's
+//! lighting (`dark_table_population_keeps_its_found_rate`; `DARK=1` switches the `diag_*`
+//! tests to it).
+//!
 //! See `planner_sim_support::score` for the details. Each run prints one line per scene and
 //! one per missed face or spurious facet.
 
@@ -30,20 +34,31 @@ fn scenarios_dir() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios"))
 }
 
-/// Snapshots of every shipped scenario and of `random` seeded layouts (antialiased unless
-/// `ALIASED` is set: a diagnostic switch, not used by the acceptance test).
-fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
-    snapshots_with(dir, random, std::env::var("ALIASED").is_err())
+/// The lighting of the random layouts.
+#[derive(Clone, Copy, PartialEq)]
+enum Population {
+    /// The grey table the issue-6 acceptance population was defined with.
+    GreyTable,
+    /// clutter3's own dark table, the closed loop's lighting since issue 7.
+    DarkTable,
 }
 
-fn snapshots_with(dir: &Path, random: u64, antialias: bool) -> Vec<Snapshot> {
+/// Snapshots of every shipped scenario and of `random` seeded layouts (antialiased unless
+/// `ALIASED` is set: a diagnostic switch, not used by the asserted tests).
+fn snapshots(dir: &Path, random: u64) -> Vec<Snapshot> {
+    let population = if std::env::var_os("DARK").is_some() { Population::DarkTable } else { Population::GreyTable };
+    snapshots_with(dir, random, std::env::var("ALIASED").is_err(), population)
+}
+
+fn snapshots_with(dir: &Path, random: u64, antialias: bool, population: Population) -> Vec<Snapshot> {
     let mut shipped: Vec<_> = std::fs::read_dir(scenarios_dir()).expect("scenarios/").filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "toml")).collect();
     shipped.sort();
     let base_name = "clutter3";
     let shipped_base = std::fs::read_to_string(scenarios_dir().join("clutter3.toml")).expect("clutter3.toml");
-    // `DARK` (diagnostics only): the random layouts take clutter3's own lighting, the dark
-    // table, instead of the population's.
-    let base = if std::env::var_os("DARK").is_some() { shipped_base } else { population_lighting(&shipped_base) };
+    let base = match population {
+        Population::DarkTable => shipped_base,
+        Population::GreyTable => population_lighting(&shipped_base),
+    };
     let light = Lighting::of_scenario(&base);
     let mut out = Vec::new();
     for p in &shipped {
@@ -74,7 +89,7 @@ fn snapshots_with(dir: &Path, random: u64, antialias: bool) -> Vec<Snapshot> {
 /// table 0.5, light 0.7, ambient 0.3: clutter3's until issue 7 darkened its table for the
 /// closed loop). The random layouts' shades are drawn against this lighting, so a change to a
 /// shipped scenario's lighting would otherwise silently swap the population being measured.
-/// The dark-table population's rate is in BENCHMARKS.md (Planner) for comparison.
+/// The dark-table population is measured too (`dark_table_population_keeps_its_found_rate`).
 fn population_lighting(base: &str) -> String {
     let mut doc: toml::Table = base.parse().expect("clutter3.toml is valid TOML");
     let table = doc.get_mut("table").and_then(|t| t.as_table_mut()).expect("[table]");
@@ -88,12 +103,18 @@ fn population_lighting(base: &str) -> String {
 /// Random layouts in the acceptance test.
 const RANDOM_LAYOUTS: u64 = 25;
 
-#[test]
-fn snapshots_meet_the_acceptance_measure() {
-    let scratch = Scratch::new("planner-sim");
-    // 25 layouts (~200 faces with the shipped scenes) rather than the issue's minimum of 10:
-    // the found rate of ~90 faces moves by a few percent with the seeds.
-    let snaps = snapshots_with(&scratch.0, RANDOM_LAYOUTS, true);
+/// What the planner found on one population of snapshots.
+struct Measure {
+    rate: f64,
+    spurious_per_scene: f64,
+    corner_median_m: f64,
+    /// One line per scene, missed face and spurious facet, and the totals.
+    text: String,
+}
+
+fn measure(population: Population, scratch_name: &str) -> Measure {
+    let scratch = Scratch::new(scratch_name);
+    let snaps = snapshots_with(&scratch.0, RANDOM_LAYOUTS, true, population);
     let mut planner = Planner::new(PlannerConfig::default());
     let (mut considered, mut found, mut spurious) = (0, 0, 0);
     let (mut corners, mut corners_affine) = (Vec::new(), Vec::new());
@@ -110,19 +131,40 @@ fn snapshots_meet_the_acceptance_measure() {
     }
     let rate = found as f64 / considered as f64;
     let spurious_per_scene = spurious as f64 / snaps.len() as f64;
-    let med = median(&corners).expect("corners");
+    let corner_median_m = median(&corners).expect("corners");
     text += &format!(
         "total: {} scenes, found {found} of {considered} faces ({:.1}%), {spurious} spurious ({spurious_per_scene:.2} per scene), corner median {:.2} mm over {} (through the affine model: {:.2} mm)\n",
         snaps.len(),
         rate * 100.0,
-        med * 1e3,
+        corner_median_m * 1e3,
         corners.len(),
         median(&corners_affine).unwrap_or(f64::NAN) * 1e3,
     );
     eprintln!("{text}");
-    assert!(rate >= 0.9, "found {found} of {considered} faces:\n{text}");
-    assert!(spurious_per_scene <= 1.0, "{spurious} spurious facets:\n{text}");
-    assert!(med <= 0.003, "median corner error {:.2} mm:\n{text}", med * 1e3);
+    Measure { rate, spurious_per_scene, corner_median_m, text }
+}
+
+#[test]
+fn snapshots_meet_the_acceptance_measure() {
+    // 25 layouts (~200 faces with the shipped scenes) rather than the issue's minimum of 10:
+    // the found rate of ~90 faces moves by a few percent with the seeds.
+    let m = measure(Population::GreyTable, "planner-sim");
+    assert!(m.rate >= 0.9, "found rate {:.3}:\n{}", m.rate, m.text);
+    assert!(m.spurious_per_scene <= 1.0, "spurious facets:\n{}", m.text);
+    assert!(m.corner_median_m <= 0.003, "median corner error {:.2} mm:\n{}", m.corner_median_m * 1e3, m.text);
+}
+
+/// The same layouts under clutter3's dark table, the lighting the closed loop plans in: its
+/// faces are dimmer against the table and each other (the L-block's tops above all), so
+/// this is where edge seeding and facet joining are weakest. 181 of 209 faces (86.6 %) since
+/// the edge seed threshold went from 4 to 3 grey levels per pixel and loose segments join a
+/// facet within 8 px (174, 83.3 % before); the bound keeps that gain.
+#[test]
+fn dark_table_population_keeps_its_found_rate() {
+    let m = measure(Population::DarkTable, "planner-sim-dark");
+    assert!(m.rate >= 0.86, "found rate {:.3}:\n{}", m.rate, m.text);
+    assert!(m.spurious_per_scene <= 0.5, "spurious facets:\n{}", m.text);
+    assert!(m.corner_median_m <= 0.003, "median corner error {:.2} mm:\n{}", m.corner_median_m * 1e3, m.text);
 }
 
 /// `handeye plan --points cage.json` on a snapshot as the simulator writes it: the pinhole

@@ -5,8 +5,8 @@
 //! view only, is an occlusion joining surfaces of different objects) and collinearity (which rejoins an edge broken by texture); each component's convex hull
 //! is formed in the cyclopean image (`(x + x')/2`), and components whose hulls intersect are
 //! merged into one facet. Only *cores* (two or more junction-connected segments) merge that
-//! way; another segment joins a facet when it touches its hull and meets a member at a
-//! junction in the left view, or lies inside the hull; otherwise it is an accidental
+//! way; another segment joins a facet when its hull comes within `join_px` of the facet's and
+//! it meets a member at a junction in the left view, or lies inside the hull; otherwise it is an accidental
 //! coplanarity, as are groups without any core: they are not facets.
 //!
 //! A facet's boundary is the *modified convex hull*: every hull edge that is not a physical
@@ -35,6 +35,11 @@ pub struct FacetConfig {
     /// Hulls closer than this count as intersecting (segment ends stop short of corners
     /// that no junction restored), pixels.
     pub touch_px: f64,
+    /// A segment that is not part of a core joins a core's facet when its hull comes this
+    /// close to the core's and one of its segments meets a member at a junction in the left
+    /// view, pixels: such an edge ends short of the facet's corner on a weak or dark face (the
+    /// junction already says it belongs), so it may stop further off than two cores may.
+    pub join_px: f64,
     /// Longest chain of edges that may bridge a concavity.
     pub bridge_max_edges: usize,
     /// Weight of the epipolar rows when refitting a facet's transfer.
@@ -46,7 +51,7 @@ pub struct FacetConfig {
 
 impl Default for FacetConfig {
     fn default() -> Self {
-        Self { min_segments: 3, min_area_px: 60.0, touch_px: 3.0, bridge_max_edges: 6, epipolar_weight: 0.1, junction_weight: 1.0 }
+        Self { min_segments: 3, min_area_px: 60.0, touch_px: 3.0, join_px: 8.0, bridge_max_edges: 6, epipolar_weight: 0.1, junction_weight: 1.0 }
     }
 }
 
@@ -190,7 +195,7 @@ pub fn find_facets(inp: &FacetInput, cfg: &FacetConfig) -> Vec<Facet> {
             let pts: Vec<P2> = groups[j].iter().flat_map(|&k| ends[k]).map(|p| plane.transfer.cyclopean(p)).collect();
             let loose = groups[j].iter().any(|&k| touching[k]);
             let joins = |i: usize| {
-                alive[i] && if loose { geom::convex_intersect(&hulls[i], &hulls[j], cfg.touch_px) } else { pts.iter().all(|&p| geom::contains(&hulls[i], p, cfg.touch_px)) }
+                alive[i] && if loose { geom::convex_intersect(&hulls[i], &hulls[j], cfg.join_px) } else { pts.iter().all(|&p| geom::contains(&hulls[i], p, cfg.touch_px)) }
             };
             if let Some(i) = (0..groups.len()).find(|&i| joins(i)) {
                 let gj = std::mem::take(&mut groups[j]);
