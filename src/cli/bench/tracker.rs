@@ -16,7 +16,7 @@ use crate::cli::track::{face_corners, list_frames, load_faces, load_gray};
 const BENCH_HELP: &str = "\
 Time the affine contour tracker on a real image sequence.
 
-Contour update: one tracker (default settings: 100 points, ±10 px search plus a ±4 px
+Contour update: one tracker (default settings: 100 points, ±10 px search plus a ±2.5 px
 refinement pass) follows `--face` through every frame, `--repeats` times. Stereo update:
 a gripper and a target contour in a left and a right view (4 contours) updated in one call,
 with frame k as the left view and frame k+1 as the right one (the faces `--face` and
@@ -57,8 +57,8 @@ pub struct TrackerArgs {
     #[arg(long, value_name = "PX", default_value_t = 0.0)]
     refine_skip_px: f64,
 
-    /// Search passes per update (1..=8; default 2: a ±10 px search, then a ±4 px refinement).
-    /// 1 costs about 60 % of 2 but loses the real top face far more often (see
+    /// Search passes per update (1..=8; default 2: a ±10 px search, then a ±2.5 px refinement).
+    /// 1 costs about 65 % of 2 but loses the real top face far more often (see
     /// `TrackerConfig::passes`): for measuring the trade-off only.
     #[arg(long, value_name = "N", default_value_t = 2)]
     passes: usize,
@@ -71,7 +71,7 @@ pub struct TrackerArgs {
 
     /// Search the short range around the prediction first and skip the wide pass when that
     /// moves no corner this far, px (0 = never, the default). 1 px halves the time but loses
-    /// the real top face or strays >= 4 px about four times as often (see
+    /// the real top face or strays >= 4 px over ten times as often (see
     /// `TrackerConfig::short_first_px`): for measuring the trade-off only.
     #[arg(long, value_name = "PX", default_value_t = 0.0)]
     short_first_px: f64,

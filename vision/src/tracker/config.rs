@@ -36,27 +36,31 @@ pub struct TrackerConfig {
     pub search_px: f64,
     /// Search passes per update: after the first pass the contour is moved and searched again
     /// with `refine_search_px`, which recovers the deformation a single step leaves behind.
-    /// One pass costs about 60 % of two, but on the real `visp-cube` sequence, started from
-    /// 55 perturbed initialisations, it lost or misplaced (>= 4 px) the top face in 28 of
-    /// them against 3 (all under 4.3 px) with two passes; reusing the first pass's edges,
-    /// re-measured at the moved points, instead of a second search failed on some of those
-    /// starts too. Two is the default.
+    /// One pass costs about 65 % of two, but on the real `visp-cube` sequence, from 495
+    /// perturbed starts (see `short_first_px`), it lost or misplaced (>= 4 px) the top face in
+    /// 244 of them (28 lost) against 11 (none lost) with two passes; reusing the first pass's
+    /// edges, re-measured at the moved points, instead of a second search failed on some of
+    /// those starts too. Two is the default.
     pub passes: usize,
     /// The first of several passes searches only every `coarse_stride`-th point of each side
     /// (1: all of them, the default): it only has to find where the contour went within the
     /// wide range, and the last pass searches every point over the short range. 2 saves about
     /// a fifth of the time, but on the real `visp-cube` sequence (the 495 runs described at
-    /// `short_first_px`) the top face strayed >= 4 px in 69 runs (38 of them >= 6 px, a lock on
-    /// a wrong edge) against 24 (6) with every point; 3 in 172.
+    /// `short_first_px`) the top face strayed >= 4 px or was lost in 51 runs (27 of them lost
+    /// or >= 6 px, a lock on a wrong edge) against 11 (5) with every point.
     pub coarse_stride: usize,
     /// Try the short search first: search `refine_search_px` around the prediction, fit with
     /// `refine_iterations`, and keep that result, skipping the wide pass, when it moves no
     /// corner by this much, px (0: never, the default). When the prediction is good that is a
     /// third of the work; but on the real `visp-cube` sequence, from 55 perturbed starts under
     /// 9 neutral variations of the settings (495 runs), 1 px let the top face stray >= 4 px
-    /// (or be lost) in 95 runs against 24 without it, and 0.3 px in 43 while saving little.
+    /// (or be lost) in 173 runs against 11 without it, and 0.5 px in 72.
     pub short_first_px: f64,
-    /// Half-length of the refinement passes' search, pixels.
+    /// Half-length of the refinement passes' search, pixels. The first pass has already put
+    /// the contour within about a pixel, so a short search sees fewer of the texture's and the
+    /// neighbouring faces' edges: on the 495 perturbed starts 2.5 px let the top face stray
+    /// or be lost in 11 runs, against 16 with 2 px, 17 with 3 px and 24 with 4 px (and the
+    /// left face be lost in 7 against 3, 12 and 18), at the same cost.
     pub refine_search_px: f64,
     /// Skip the remaining passes once a pass moves no corner by this much, px (0: never).
     /// 1 px saves about a quarter of the time but, on the same 55 starts, misplaced the top
@@ -135,7 +139,7 @@ impl Default for TrackerConfig {
             passes: 2,
             coarse_stride: 1,
             short_first_px: 0.0,
-            refine_search_px: 4.0,
+            refine_search_px: 2.5,
             refine_skip_px: 0.0,
             edge_sign: EdgeSign::Either,
             min_contrast: 12,
