@@ -154,9 +154,10 @@ fn snapshots_meet_the_acceptance_measure() {
     assert!(m.corner_median_m <= 0.003, "median corner error {:.2} mm:\n{}", m.corner_median_m * 1e3, m.text);
 }
 
-/// The same layouts under clutter3's dark table, the lighting the closed loop plans in: its
-/// faces are dimmer against the table and each other (the L-block's tops above all), so
-/// this is where edge seeding and facet joining are weakest. 181 of 209 faces (86.6 %) since
+/// The same layouts under clutter3's dark table, the lighting the closed loop plans in: the
+/// blocks stand out from the table, but under its stronger ambient light a block's faces
+/// differ less from each other (the L-block's tops above all), so this is where edge seeding
+/// and facet joining are weakest. 181 of 209 faces (86.6 %) since
 /// the edge seed threshold went from 4 to 3 grey levels per pixel and loose segments join a
 /// facet within 8 px (174, 83.3 % before); the bound keeps that gain.
 #[test]
