@@ -445,11 +445,31 @@ pub struct TrackerSettings {
     /// stands still, and a face edge with almost no contrast against the table (the cube's
     /// front face in `pick_cube`) otherwise drifts away at the speed the filter once saw.
     pub target_deformation_velocity_gain: f64,
+    /// Search passes per update: 2 (a wide search, then a short refinement) is the robust
+    /// default; 1 costs about two thirds as much but loses or misplaces a real face from
+    /// perturbed starts far more often (`TrackerConfig::passes`; BENCHMARKS.md, Tracker).
+    pub passes: usize,
+    /// Half-length of the refinement pass's search, px.
+    pub refine_search_px: f64,
+    /// Search the short range first and skip the wide pass when that moves no corner this
+    /// far, px (0 = never, the default): about half the cost, far less robust
+    /// (`TrackerConfig::short_first_px`).
+    pub short_first_px: f64,
 }
 
 impl Default for TrackerSettings {
     fn default() -> Self {
-        Self { points: 100, search_px: 12.0, min_contrast: 12, projective: true, target_deformation_velocity_gain: 0.0 }
+        let base = handeye_vision::tracker::TrackerConfig::default();
+        Self {
+            points: 100,
+            search_px: 12.0,
+            min_contrast: 12,
+            projective: true,
+            target_deformation_velocity_gain: 0.0,
+            passes: base.passes,
+            refine_search_px: base.refine_search_px,
+            short_first_px: base.short_first_px,
+        }
     }
 }
 
@@ -479,6 +499,9 @@ impl TrackerSettings {
             points: self.points,
             search_px: self.search_px,
             min_contrast: self.min_contrast,
+            passes: self.passes,
+            refine_search_px: self.refine_search_px,
+            short_first_px: self.short_first_px,
             model: if self.projective {
                 handeye_vision::tracker::DeformationModel::Projective
             } else {
@@ -617,8 +640,19 @@ impl DaemonConfig {
         if !(self.servo.standoff_above_m.is_finite() && self.servo.standoff_above_m >= 0.0) {
             return bad("servo.standoff_above_m", self.servo.standoff_above_m.to_string(), ">= 0");
         }
-        if self.tracker.tracker_config().validate().is_err() || self.tracker.target_tracker_config().validate().is_err() {
-            return bad("tracker", format!("{:?}", self.tracker), "valid tracker settings (points 12..=4096, search_px 1..=40, min_contrast 1..=255)");
+        if let Err(e) = self.tracker.tracker_config().validate().and_then(|_| self.tracker.target_tracker_config().validate()) {
+            // The daemon's names for the settings it exposes.
+            let field = match e.field {
+                "points" => "tracker.points",
+                "search_px" => "tracker.search_px",
+                "min_contrast" => "tracker.min_contrast",
+                "passes" => "tracker.passes",
+                "refine_search_px" => "tracker.refine_search_px",
+                "short_first_px" => "tracker.short_first_px",
+                "deformation_velocity_gain" => "tracker.target_deformation_velocity_gain",
+                _ => "tracker",
+            };
+            return Err(ConfigError::Invalid { file: file.to_path_buf(), field, value: e.value.to_string(), expected: e.expected });
         }
         if (0..3).any(|i| self.safety.workspace_min_m[i] >= self.safety.workspace_max_m[i]) {
             return bad("safety.workspace_min_m", format!("{:?}", self.safety.workspace_min_m), "below workspace_max_m on every axis");
@@ -662,5 +696,22 @@ mod tests {
         assert!(err.contains("w.toml") && err.contains("gripper.max_grasp_width_m"), "{err}");
         let err = DaemonConfig::parse("frame_rate_hz = \"fast\"\n", Path::new("f.toml")).unwrap_err().to_string();
         assert!(err.contains("f.toml") && err.contains("frame_rate_hz"), "{err}");
+        // Tracker settings are named as the daemon's file names them, with the valid range.
+        let err = DaemonConfig::parse("[tracker]\npasses = 0\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(err.contains("t.toml") && err.contains("tracker.passes") && err.contains("1..=8"), "{err}");
+        let err = DaemonConfig::parse("[tracker]\nrefine_search_px = 0.5\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(err.contains("tracker.refine_search_px"), "{err}");
+    }
+
+    #[test]
+    fn tracker_speed_settings_reach_every_contour() {
+        let cfg = DaemonConfig::parse("[tracker]\npasses = 1\nshort_first_px = 0.5\nrefine_search_px = 3.0\n", Path::new("t.toml")).unwrap();
+        for t in [cfg.plate_tracker_config(), cfg.tracker.target_tracker_config()] {
+            assert_eq!((t.passes, t.short_first_px, t.refine_search_px), (1, 0.5, 3.0));
+        }
+        // Unset, they are the tracker's own defaults.
+        let d = DaemonConfig::default().tracker.tracker_config();
+        let base = handeye_vision::tracker::TrackerConfig::default();
+        assert_eq!((d.passes, d.short_first_px, d.refine_search_px), (base.passes, base.short_first_px, base.refine_search_px));
     }
 }
