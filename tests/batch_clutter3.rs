@@ -71,3 +71,28 @@ fn a_two_seed_batch_lifts_both_targets_and_writes_the_report() {
         assert!(std::fs::read_dir(&dir).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with("_plan.png")));
     }
 }
+
+/// A bad `--config` stops the batch before any run, naming the file and the key: a typo
+/// must not cost 30 closed loops that all fail the same way.
+#[test]
+fn a_bad_daemon_config_fails_before_the_first_run() {
+    let dir = TempDir::new("batch-config");
+    let config = dir.0.join("fast.toml");
+    std::fs::write(&config, "[tracker]\npasses = 0\n").expect("write config");
+    let out = dir.0.join("report");
+    let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
+        .arg("batch")
+        .arg(scenario("clutter3.toml"))
+        .args(["--seeds", "30", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&out)
+        .env("HANDEYE_LOG", "warn")
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("handeye batch");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "a bad config must fail the batch");
+    assert!(stderr.contains("fast.toml") && stderr.contains("tracker.passes") && stderr.contains("1..=8"), "stderr: {stderr}");
+    assert!(!out.exists(), "no run may start (the report folder was created)");
+}

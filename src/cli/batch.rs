@@ -32,8 +32,9 @@ use serde_json::{json, Value};
 ///
 /// With --json, one object instead: runs, successes, success_rate, failures (phase →
 /// reason → count), failed_runs (scenario, seed, phase, reason in full), median_servo_steps,
-/// median_run_wall_s, wall_s, scenarios (the same per scenario), and every run's summary
-/// (runs_detail: what `handeye run --json` printed).
+/// median_run_wall_s, wall_s, scenarios (the same per scenario), daemon_config (the
+/// --config file or null), and every run's summary (runs_detail: what `handeye run --json`
+/// printed).
 ///
 /// With --out DIR: DIR/index.html (the table, a row per run linking its page) and, per run,
 /// DIR/<scenario>/seed-<S>/ with `handeye run`'s report (overlays of the tracked contours at
@@ -45,6 +46,7 @@ use serde_json::{json, Value};
 ///   handeye batch scenarios/clutter3.toml --seeds 30
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
+///   handeye batch scenarios/clutter3.toml --seeds 30 --config fast.toml   # other daemon settings
 #[derive(Args)]
 #[command(verbatim_doc_comment)]
 pub struct BatchArgs {
@@ -72,6 +74,10 @@ pub struct BatchArgs {
     /// Kill a run after this many seconds of wall time (`handeye run --timeout-s`).
     #[arg(long, default_value_t = 300.0, value_name = "S")]
     timeout_s: f64,
+    /// Daemon configuration (TOML) for every run (`handeye run --config`), e.g. to compare
+    /// tracker settings over the same layouts. Checked before the first run starts.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
 }
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
@@ -176,6 +182,9 @@ fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
     if args.hint {
         cmd_args.push("--hint".into());
     }
+    if let Some(config) = &args.config {
+        cmd_args.extend(["--config".into(), config.display().to_string()]);
+    }
     if let Some(out) = &job.out {
         cmd_args.extend(["--out".into(), out.display().to_string()]);
     }
@@ -216,6 +225,10 @@ pub fn run(args: BatchArgs) -> Result<()> {
     }
     if args.jobs == 0 {
         bail!("--jobs must be at least 1");
+    }
+    if let Some(config) = &args.config {
+        // A bad file fails here, with its key, rather than in every run.
+        handeye_daemon::DaemonConfig::load(config)?;
     }
     let files = collect_scenarios(&args.scenarios)?;
     let mut jobs = Vec::new();
@@ -282,7 +295,8 @@ pub fn run(args: BatchArgs) -> Result<()> {
     outcomes.sort_by_key(|(i, _)| *i);
     let outcomes: Vec<Outcome> = outcomes.into_iter().map(|(_, o)| o).collect();
     let wall_s = start.elapsed().as_secs_f64();
-    let report = summarise(&outcomes, wall_s);
+    let mut report = summarise(&outcomes, wall_s);
+    report["daemon_config"] = args.config.as_ref().map_or(Value::Null, |c| Value::String(c.display().to_string()));
     if let Some(out) = &args.out {
         std::fs::write(out.join("batch.json"), serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", out.join("batch.json").display()))?;
         write_pages(out, &outcomes, &report)?;
