@@ -5,9 +5,9 @@
 //! view only, is an occlusion joining surfaces of different objects) and collinearity (which rejoins an edge broken by texture); each component's convex hull
 //! is formed in the cyclopean image (`(x + x')/2`), and components whose hulls intersect are
 //! merged into one facet. Only *cores* (two or more junction-connected segments) merge that
-//! way; another segment joins a facet when its hull comes within `join_px` of the facet's and
-//! it meets a member at a junction in the left view, or lies inside the hull; otherwise it is an accidental
-//! coplanarity, as are groups without any core: they are not facets.
+//! way; another segment joins a facet when its hull comes within `join_px` of the facet's
+//! and it meets a member at a junction in the left view, or lies inside the hull; otherwise
+//! it is an accidental coplanarity, as are groups without any core: they are not facets.
 //!
 //! A facet's boundary is the *modified convex hull*: every hull edge that is not a physical
 //! edge, but whose ends lie on the facet's connected edges, is replaced by the chain of

@@ -54,7 +54,9 @@ pub struct TrackerConfig {
     /// corner by this much, px (0: never, the default). When the prediction is good that is a
     /// third of the work; but on the real `visp-cube` sequence, from 55 perturbed starts under
     /// 9 neutral variations of the settings (495 runs), 1 px let the top face stray >= 4 px
-    /// (or be lost) in 173 runs against 11 without it, and 0.5 px in 72.
+    /// (or be lost) in 173 runs against 11 without it; 0.5 px in 17 (13 of them >= 6 px, a
+    /// lock on a wrong edge, against 5) at about 0.7x the default's median time; 0.3 px lost
+    /// a contour in every pass of the stereo benchmark.
     pub short_first_px: f64,
     /// Half-length of the refinement passes' search, pixels. The first pass has already put
     /// the contour within about a pixel, so a short search sees fewer of the texture's and the
