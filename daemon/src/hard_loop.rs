@@ -16,7 +16,7 @@ use handeye_wire::{
 };
 
 use crate::config::DaemonConfig;
-use crate::hint::OperatorHint;
+use handeye_wire::hint::OperatorHint;
 use crate::outcome::DaemonOutcome;
 use crate::phase::{acquire_gripper::AcquireGripper, Cmd, Cycle, Mission, PhaseState, Step};
 use crate::recovery::RecoveryStep;

@@ -12,7 +12,6 @@
 pub mod config;
 pub mod gripper;
 pub mod hard_loop;
-pub mod hint;
 pub mod outcome;
 pub mod phase;
 pub mod planning;
@@ -26,5 +25,5 @@ pub mod worker;
 
 pub use config::DaemonConfig;
 pub use hard_loop::HardLoop;
-pub use hint::OperatorHint;
+pub use handeye_wire::hint::OperatorHint;
 pub use outcome::DaemonOutcome;

@@ -1,12 +1,12 @@
 //! The daemon's account of a run (`daemon.json`, and what `handeye daemon --json` prints).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::hard_loop::HardLoop;
 use crate::phase::{CalibrationStats, PlanningStats, ServoTraceRow, TargetSource};
 use crate::planning::PlanSummary;
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct DaemonOutcome {
     /// The daemon finished its task (grasped and lifted; the simulator judges the rest).
     pub success: bool,
@@ -14,7 +14,11 @@ pub struct DaemonOutcome {
     pub phase_reached: String,
     /// Phase at the end: `done`, `failed`, `stopped` (or the working phase when cut short).
     pub final_phase: String,
+    /// The failure's detail (the same text as `failure.detail`), kept for readers of the
+    /// documented shape.
     pub failure_reason: Option<String>,
+    /// What went wrong, typed: phase, kind, detail.
+    pub failure: Option<handeye_wire::report::Failure>,
     pub servo_steps: u32,
     /// Cycle time (frame received → command sent), µs.
     pub loop_us_p50: f64,
@@ -53,6 +57,8 @@ impl DaemonOutcome {
             phase_reached: l.phase_reached().name().to_string(),
             final_phase: phase.name().to_string(),
             failure_reason: l.failure().map(str::to_string),
+            // Interim: the kind is not classified yet where the failure is raised.
+            failure: l.failure().map(|r| handeye_wire::report::Failure::new(l.phase_reached().name(), handeye_wire::report::FailureKind::Internal, r)),
             servo_steps: l.mission.servo_steps,
             loop_us_p50: us(t.percentile_ns(50.0)),
             loop_us_p99: us(t.percentile_ns(99.0)),

@@ -20,7 +20,7 @@ use handeye_wire::{monotonic_ns, Domain, RobotCommand, RobotState, Telemetry, Wi
 
 use crate::config::DaemonConfig;
 use crate::hard_loop::HardLoop;
-use crate::hint::OperatorHint;
+use handeye_wire::hint::OperatorHint;
 use crate::outcome::DaemonOutcome;
 use crate::report::{ReportJob, ReportWriter, Snapshot};
 

@@ -8,7 +8,7 @@
 //! along its normal), front-facing in both views, largest smaller-of-two projected area.
 
 use glam::DVec3;
-use serde::{Deserialize, Serialize};
+pub use handeye_wire::hint::{OperatorHint, HINT_VERSION};
 
 use crate::rng::SplitMix64;
 use crate::simulator::Simulator;
@@ -17,25 +17,6 @@ use crate::simulator::Simulator;
 pub const HINT_CORNER_ERROR_PX: f64 = 3.0;
 /// Largest error of the hint's depth, millimetres.
 pub const HINT_DEPTH_ERROR_MM: f64 = 2.0;
-/// Version of the hint file format.
-pub const HINT_VERSION: u32 = 1;
-
-/// `hint.json`: what the operator tells the daemon about the target.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OperatorHint {
-    /// Format version, [`HINT_VERSION`].
-    pub version: u32,
-    /// The facet's corners in the left image, pixels (pixel centres at integers), in order
-    /// around the facet; the same physical corners in the same order in `right_px`.
-    pub left_px: Vec<[f64; 2]>,
-    pub right_px: Vec<[f64; 2]>,
-    /// Extent of the block behind the facet, along its normal (the grasp width), mm.
-    pub depth_mm: f64,
-    /// Free text: where the hint came from.
-    #[serde(default)]
-    pub note: String,
-}
 
 /// The facet the hint describes (ground truth, kept by the simulator for judging).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -18,8 +18,10 @@
 
 pub mod checksum;
 pub mod domain;
+pub mod hint;
 mod liveness;
 pub mod message;
+pub mod report;
 pub mod services;
 pub mod stereo;
 pub mod types;

@@ -21,11 +21,11 @@ use handeye_vision::image::ImageView;
 use handeye_vision::servo::ServoModel;
 use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackerConfig, View};
 use handeye_wire::{robot_flags, CommandKind, GripperCommand, Phase, RobotState};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::config::DaemonConfig;
 use crate::gripper::PlateTemplate;
-use crate::hint::OperatorHint;
+use handeye_wire::hint::OperatorHint;
 use crate::worker::Worker;
 
 /// What a phase asks the robot for this frame (the hard loop stamps seq, frame and time).
@@ -100,7 +100,7 @@ pub struct Calibration {
 }
 
 /// Numbers of the calibration for the outcome and the report.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationStats {
     pub points: usize,
     /// RMS residual of the affine fit over the cage, px.
@@ -145,7 +145,7 @@ pub fn run_job(job: Job) -> JobResult {
 }
 
 /// One servo step for the report's plot.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ServoTraceRow {
     pub step: u32,
     pub frame: u64,
@@ -157,7 +157,7 @@ pub struct ServoTraceRow {
 }
 
 /// Where the target came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TargetSource {
     /// The operator clicked the facet in both views (`hint.json`).
@@ -201,7 +201,7 @@ impl TargetSpec {
 }
 
 /// How the loop fared while the planner worked.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PlanningStats {
     /// Frames answered between handing the pair over and taking the result.
     pub frames: u64,

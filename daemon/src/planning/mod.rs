@@ -29,7 +29,7 @@ use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_pla
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
 use nalgebra::{Vector3, Vector4};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 mod pixels;
 pub use pixels::{edge_support, mask_and_fill, simplify_closed, tracker_order};
@@ -101,7 +101,7 @@ pub struct PlannedTarget {
 }
 
 /// One planner facet, as the report shows it.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FacetSummary {
     pub plan_facet: usize,
     /// Outline in both views, tracker pixels.
@@ -116,7 +116,7 @@ pub struct FacetSummary {
 }
 
 /// A grasp site, as the report shows it.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SiteSummary {
     pub plan_facet: usize,
     /// The site's facet was hypothesised below the top face `plan_facet`.
@@ -135,7 +135,7 @@ pub struct SiteSummary {
 }
 
 /// What the planner found and decided (`plan.json`, and the outcome's `plan`).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct PlanSummary {
     pub segments: [usize; 2],
     pub matches: usize,

@@ -1,22 +1,29 @@
 //! The operator hint (`hint.json`): the target facet's outline in both views, as an operator
-//! clicks it (the grasp planner will replace it), and the block's extent behind the facet.
-//! Read once at start-up.
+//! clicks it, and the block's extent behind the facet. It is part of the contract between an
+//! operator tool (the simulator writes one; a person or `handeye hint` may too) and the
+//! daemon, which reads it once at start-up.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-/// `hint.json`, version 1.
+/// Version of the hint file format this crate reads and writes.
+pub const HINT_VERSION: u32 = 1;
+
+/// `hint.json`, version [`HINT_VERSION`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OperatorHint {
+    /// Format version, [`HINT_VERSION`].
     pub version: u32,
-    /// Facet corners in the left image, pixels, in order around it (3..=8).
+    /// Facet corners in the left image, pixels (pixel centres at integers), in order around
+    /// it (3..=8).
     pub left_px: Vec<[f64; 2]>,
-    /// The same corners, same order, in the right image.
+    /// The same physical corners, same order, in the right image.
     pub right_px: Vec<[f64; 2]>,
     /// Extent of the object behind the facet along its normal (the grasp width), mm.
     pub depth_mm: f64,
+    /// Free text: where the hint came from.
     #[serde(default)]
     pub note: String,
 }
@@ -40,7 +47,7 @@ impl OperatorHint {
     pub fn parse(text: &str, file: &Path) -> Result<Self, HintError> {
         let hint: Self = serde_json::from_str(text).map_err(|e| HintError::Parse { file: file.to_path_buf(), message: e.to_string() })?;
         let bad = |field, message: String| Err(HintError::Invalid { file: file.to_path_buf(), field, message });
-        if hint.version != 1 {
+        if hint.version != HINT_VERSION {
             return bad("version", format!("{} (this daemon reads version 1)", hint.version));
         }
         if !(3..=8).contains(&hint.left_px.len()) {
