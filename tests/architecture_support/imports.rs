@@ -106,10 +106,10 @@ impl CrateGraph {
                 let open = if toks.get(i + 1).is_some_and(|t| t.is_punct('!')) { i + 2 } else { i + 1 };
                 if toks.get(open).is_some_and(|t| t.is_punct('[')) {
                     let close = matching(&toks, open, '[', ']');
-                    if let [Token::Ident(a), Token::Punct('='), Token::Str(p)] = &toks[open + 1..close] {
-                        if a == "path" {
-                            path_attr = Some(p.clone());
-                        }
+                    if let [Token::Ident(a), Token::Punct('='), Token::Str(p)] = &toks[open + 1..close]
+                        && a == "path"
+                    {
+                        path_attr = Some(p.clone());
                     }
                     i = close + 1;
                     continue;

@@ -73,12 +73,11 @@ fn link_targets(text: &str) -> Vec<(usize, String)> {
             continue;
         }
         let line = without_code_spans(line);
-        if let Some(rest) = line.trim_start().strip_prefix('[') {
-            if let Some((_, def)) = rest.split_once("]:") {
-                if let Some(t) = def.split_whitespace().next() {
-                    out.push((n + 1, t.trim_matches(['<', '>']).to_owned()));
-                }
-            }
+        if let Some(rest) = line.trim_start().strip_prefix('[')
+            && let Some((_, def)) = rest.split_once("]:")
+            && let Some(t) = def.split_whitespace().next()
+        {
+            out.push((n + 1, t.trim_matches(['<', '>']).to_owned()));
         }
         let mut rest = line.as_str();
         while let Some(k) = rest.find("](") {
