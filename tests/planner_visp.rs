@@ -1,12 +1,12 @@
 //! The planner on real frames: the visp-cube sequence (`$HANDEYE_DATA/visp-cube`, see
-//! `test_data`) seen as a stereo pair, with the epipolar constraint fitted from face corners
+//! `data_support`) seen as a stereo pair, with the epipolar constraint fitted from face corners
 //! annotated by eye in frames 0, 20 and 40 (our annotations, in `tests/data`). Each test
 //! reports itself skipped when the frames are absent.
 //!
 //! Frames 0-36 of the sequence show one and the same view (only the exposure changes), so the
 //! pair 0/20 named in the issue has no parallax at all; the pair 0/40 is a real stereo pair.
 
-mod test_data;
+mod data_support;
 
 use std::path::Path;
 
@@ -78,7 +78,7 @@ struct Pair0And40 {
 /// The planner on frames 0 and 40, the epipolar constraint fitted from the faces annotated
 /// in both; `None` when the data is absent.
 fn plan_frames_0_and_40() -> Option<Pair0And40> {
-    let dir = test_data::visp_cube(&["image0000.png", "image0040.png"])?;
+    let dir = data_support::visp_cube(&["image0000.png", "image0040.png"])?;
     let f0 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame0.json")));
     let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
     let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
@@ -130,7 +130,7 @@ fn frames_0_and_40_give_the_three_faces_as_three_distinct_planes() {
 
 #[test]
 fn frames_0_and_20_have_no_parallax_so_no_stereo_geometry() {
-    let Some(dir) = test_data::visp_cube(&["image0000.png", "image0020.png"]) else { return };
+    let Some(dir) = data_support::visp_cube(&["image0000.png", "image0020.png"]) else { return };
     let f0 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame0.json")));
     let f20 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame20.json")));
     // The corners annotated in frame 20 are frame 0's: the correspondences span only two

@@ -1,5 +1,5 @@
 //! The tracker on real frames: the `visp-cube` sequence (218 frames of a textured cube seen by
-//! a hand-held camera; `$HANDEYE_DATA/visp-cube`, see `test_data`). The top face, initialised
+//! a hand-held camera; `$HANDEYE_DATA/visp-cube`, see `data_support`). The top face, initialised
 //! from `faces-frame0.json`, must be tracked through every frame without being lost, and its
 //! corners must stay within 4 px of ground truth annotated by eye on frames spread over the
 //! sequence. Reports itself skipped when the data set is absent.
@@ -10,8 +10,8 @@ use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, TrackState, TrackerConfig};
 use nalgebra::Vector2;
 
-#[path = "../../tests/test_data/mod.rs"]
-mod test_data;
+#[path = "../../tests/data_support/mod.rs"]
+mod data_support;
 mod visp_cube_truth;
 use visp_cube_truth::{GROUND_TRUTH, TOP_FACE_FRAME0};
 
@@ -25,7 +25,7 @@ fn load(dir: &Path, k: usize) -> ImageBuf {
 
 #[test]
 fn top_face_is_tracked_through_all_frames_within_4_px_of_ground_truth() {
-    let Some(dir) = test_data::visp_cube(&["image0000.png", "image0217.png"]) else { return };
+    let Some(dir) = data_support::visp_cube(&["image0000.png", "image0217.png"]) else { return };
     let mut tracker = ContourTracker::new(TrackerConfig::default(), &TOP_FACE_FRAME0).unwrap();
     let mut checked = 0;
     let mut worst: f64 = 0.0;
