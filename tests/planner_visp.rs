@@ -1,12 +1,14 @@
-//! The planner on real frames: the visp-cube sequence (`../shared/data/visp-cube`) seen as a
-//! stereo pair, with the epipolar constraint fitted from face corners annotated by eye in
-//! both frames (frame 0: the data set's `faces-frame0.json`; frames 20 and 40: our own
-//! annotations in `tests/data`). Skips with a message when the data set is absent.
+//! The planner on real frames: the visp-cube sequence (`$HANDEYE_DATA/visp-cube`, see
+//! `data_support`) seen as a stereo pair, with the epipolar constraint fitted from face corners
+//! annotated by eye in frames 0, 20 and 40 (our annotations, in `tests/data`). Each test
+//! reports itself skipped when the frames are absent.
 //!
 //! Frames 0-36 of the sequence show one and the same view (only the exposure changes), so the
 //! pair 0/20 named in the issue has no parallax at all; the pair 0/40 is a real stereo pair.
 
-use std::path::{Path, PathBuf};
+mod data_support;
+
+use std::path::Path;
 
 use handeye_vision::affine::FitError;
 use handeye_vision::image::ImageBuf;
@@ -15,16 +17,6 @@ use handeye_vision::planner::geom::{self, P2};
 use handeye_vision::planner::segments::{SegmentConfig, SegmentDetector};
 use handeye_vision::planner::{Plan, Planner, PlannerConfig, StereoGeometry};
 use serde_json::Value;
-
-fn data_dir() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/visp-cube");
-    if d.join("image0040.png").exists() && d.join("faces-frame0.json").exists() {
-        Some(d)
-    } else {
-        eprintln!("skipping: visp-cube data not found at {}", d.display());
-        None
-    }
-}
 
 fn load(path: &Path) -> ImageBuf {
     let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_luma8();
@@ -86,8 +78,8 @@ struct Pair0And40 {
 /// The planner on frames 0 and 40, the epipolar constraint fitted from the faces annotated
 /// in both; `None` when the data is absent.
 fn plan_frames_0_and_40() -> Option<Pair0And40> {
-    let dir = data_dir()?;
-    let f0 = faces(&json(&dir.join("faces-frame0.json")));
+    let dir = data_support::visp_cube(&["image0000.png", "image0040.png"])?;
+    let f0 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame0.json")));
     let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
     let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
     let (left, right) = (load(&dir.join("image0000.png")), load(&dir.join("image0040.png")));
@@ -138,8 +130,8 @@ fn frames_0_and_40_give_the_three_faces_as_three_distinct_planes() {
 
 #[test]
 fn frames_0_and_20_have_no_parallax_so_no_stereo_geometry() {
-    let Some(dir) = data_dir() else { return };
-    let f0 = faces(&json(&dir.join("faces-frame0.json")));
+    let Some(dir) = data_support::visp_cube(&["image0000.png", "image0020.png"]) else { return };
+    let f0 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame0.json")));
     let f20 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame20.json")));
     // The corners annotated in frame 20 are frame 0's: the correspondences span only two
     // dimensions of (u, v, u', v') space, and no epipolar constraint can be fitted.

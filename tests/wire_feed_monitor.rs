@@ -1,5 +1,6 @@
 //! `handeye feed` and `handeye monitor` in two processes: every frame arrives, intact, in order.
 
+mod data_support;
 mod wire_support;
 
 use std::path::PathBuf;
@@ -9,10 +10,7 @@ use wire_support::*;
 
 #[test]
 fn cube_sequence_200_frames_lossless_with_matching_checksum() {
-    let Some(cube) = cube_dir() else {
-        eprintln!("SKIP: ../shared/data/visp-cube is absent");
-        return;
-    };
+    let Some(cube) = data_support::visp_cube(&["image0000.png"]) else { return };
     let domain = TestDomain::new("feedmon");
     // The feed starts first and waits for its subscriber.
     let mut feed_cmd = handeye(&domain);

@@ -130,12 +130,6 @@ impl Drop for Proc {
     }
 }
 
-/// The real camera sequence, if present.
-pub fn cube_dir() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/visp-cube");
-    d.join("image0000.png").is_file().then_some(d)
-}
-
 /// PNG files of `dir` in file-name order.
 pub fn pngs(dir: &Path) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)

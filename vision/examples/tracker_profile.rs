@@ -8,8 +8,10 @@
 //! the ground truth of `vision/tests/tracker_visp_cube.rs`.
 //!
 //! ```text
-//! cargo run --release -p handeye-vision --example tracker_profile -- ../shared/data/visp-cube [REPEATS]
+//! cargo run --release -p handeye-vision --example tracker_profile -- [DIR [REPEATS]]
 //! ```
+//!
+//! `DIR` defaults to `$HANDEYE_DATA/visp-cube` (README.md, "Test data").
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -18,6 +20,8 @@ use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
 use nalgebra::Vector2;
 
+#[path = "../../tests/data_support/mod.rs"]
+mod data_support;
 #[path = "../tests/visp_cube_truth/mod.rs"]
 mod visp_cube_truth;
 use visp_cube_truth::{GROUND_TRUTH as TRUTH, TOP_FACE_FRAME0 as TOP};
@@ -33,7 +37,7 @@ fn load(dir: &Path, k: usize) -> ImageBuf {
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let dir = PathBuf::from(args.next().unwrap_or_else(|| "../shared/data/visp-cube".into()));
+    let dir = args.next().map(PathBuf::from).unwrap_or_else(|| data_support::data_dir().join("visp-cube"));
     let repeats: usize = args.next().map(|s| s.parse().expect("REPEATS")).unwrap_or(5);
     let frames: Vec<ImageBuf> = (0..218).map(|k| load(&dir, k)).collect();
     // Experiments: TRACKER_<FIELD>=value overrides a few settings.

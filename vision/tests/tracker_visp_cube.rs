@@ -1,22 +1,19 @@
 //! The tracker on real frames: the `visp-cube` sequence (218 frames of a textured cube seen by
-//! a hand-held camera; `../shared/data/visp-cube`). The top face, initialised from
-//! `faces-frame0.json`, must be tracked through every frame without being lost, and its
+//! a hand-held camera; `$HANDEYE_DATA/visp-cube`, see `data_support`). The top face, initialised
+//! from `faces-frame0.json`, must be tracked through every frame without being lost, and its
 //! corners must stay within 4 px of ground truth annotated by eye on frames spread over the
-//! sequence. Skips (with a message) when the data set is absent.
+//! sequence. Reports itself skipped when the data set is absent.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, TrackState, TrackerConfig};
 use nalgebra::Vector2;
 
+#[path = "../../tests/data_support/mod.rs"]
+mod data_support;
 mod visp_cube_truth;
 use visp_cube_truth::{GROUND_TRUTH, TOP_FACE_FRAME0};
-
-fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/visp-cube");
-    dir.join("image0000.png").is_file().then_some(dir)
-}
 
 fn load(dir: &Path, k: usize) -> ImageBuf {
     let path = dir.join(format!("image{k:04}.png"));
@@ -28,10 +25,7 @@ fn load(dir: &Path, k: usize) -> ImageBuf {
 
 #[test]
 fn top_face_is_tracked_through_all_frames_within_4_px_of_ground_truth() {
-    let Some(dir) = data_dir() else {
-        eprintln!("skipping: ../shared/data/visp-cube not found");
-        return;
-    };
+    let Some(dir) = data_support::visp_cube(&["image0000.png", "image0217.png"]) else { return };
     let mut tracker = ContourTracker::new(TrackerConfig::default(), &TOP_FACE_FRAME0).unwrap();
     let mut checked = 0;
     let mut worst: f64 = 0.0;

@@ -1,6 +1,8 @@
 //! `handeye bench`: one module per measured part. Benchmarks print numbers; tests never
 //! assert timings.
 
+use std::path::PathBuf;
+
 use anyhow::Result;
 use clap::{Args, Subcommand};
 
@@ -34,4 +36,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchWhat::Render(args) => render::run(args),
         BenchWhat::Planner(args) => planner::run(args),
     }
+}
+
+/// The real `visp-cube` frames' default folder: `$HANDEYE_DATA/visp-cube`, with
+/// `HANDEYE_DATA` defaulting to `../shared/data` (README.md, "Test data"; the tests use the
+/// same setting).
+fn visp_cube_dir() -> PathBuf {
+    let data = std::env::var_os("HANDEYE_DATA").filter(|d| !d.is_empty()).map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
+    data.join("visp-cube")
 }

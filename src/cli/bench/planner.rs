@@ -35,8 +35,9 @@ Examples:
 #[derive(Args, Debug)]
 #[command(after_long_help = BENCH_HELP)]
 pub struct PlannerArgs {
-    /// The visp-cube folder (image0000.png ... and faces-frame0.json).
-    #[arg(long, default_value = "../shared/data/visp-cube", value_name = "DIR")]
+    /// The visp-cube folder (image0000.png ... and faces-frame0.json) [default:
+    /// $HANDEYE_DATA/visp-cube, HANDEYE_DATA defaulting to ../shared/data].
+    #[arg(long, default_value_os_t = super::visp_cube_dir(), hide_default_value = true, value_name = "DIR")]
     pub data: PathBuf,
     /// Use the rendered five-box scene even when the real pair is available.
     #[arg(long, conflicts_with = "snapshot")]

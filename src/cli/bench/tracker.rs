@@ -25,14 +25,16 @@ stereo rate it allows. Build with `--release` for numbers worth recording.
 
 Example:
 
+  cargo run --release -- bench tracker --json      # frames from $HANDEYE_DATA/visp-cube
   cargo run --release -- bench tracker --dir ../shared/data/visp-cube --json";
 
 /// Arguments of `handeye bench tracker`.
 #[derive(Args, Debug)]
 #[command(after_help = BENCH_HELP)]
 pub struct TrackerArgs {
-    /// Folder of frames (PNG), read in file-name order.
-    #[arg(long, value_name = "DIR", default_value = "../shared/data/visp-cube")]
+    /// Folder of frames (PNG), read in file-name order [default: $HANDEYE_DATA/visp-cube,
+    /// HANDEYE_DATA defaulting to ../shared/data].
+    #[arg(long, value_name = "DIR", default_value_os_t = super::visp_cube_dir(), hide_default_value = true)]
     dir: PathBuf,
 
     /// Init JSON with the polygons under "faces" [default: DIR/faces-frame0.json].
