@@ -16,8 +16,8 @@
 use glam::DVec3;
 use handeye_wire::{CommandKind, GripperCommand, NO_FRAME, RejectReason, RobotCommand, RobotState, WIRE_VERSION, robot_flags};
 
-use crate::arm::{ArmReading, FINGER_CLOSE_TARGET_M, FINGER_TRAVEL_M, MotorTargets};
-use crate::kinematics::{IkError, JOINT_MAX_SPEED_RADPS, ToolPose, ik, wrap_angle};
+use crate::cell::arm::{ArmReading, FINGER_CLOSE_TARGET_M, FINGER_TRAVEL_M, MotorTargets};
+use crate::cell::kinematics::{IkError, JOINT_MAX_SPEED_RADPS, ToolPose, ik, wrap_angle};
 
 /// Fault codes in [`RobotState::fault`].
 pub mod fault {
@@ -510,7 +510,7 @@ mod tests {
 
     fn reading_at(pose: ToolPose) -> ArmReading {
         let q = ik(pose).unwrap();
-        let arm = crate::kinematics::fk(&q);
+        let arm = crate::cell::kinematics::fk(&q);
         ArmReading {
             q_rad: q,
             dq_radps: [0.0; 5],

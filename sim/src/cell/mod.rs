@@ -1,0 +1,14 @@
+//! The physical work cell: the table and the blocks ([`world`], shaped by [`geometry`]), the
+//! 5-DOF arm with its gripper ([`arm`], dimensioned by [`kinematics`]) and the arm's own
+//! [`controller`], stepped by rapier at the scenario's fixed rate.
+//!
+//! Depends only on the scenario's data (and the wire contract's command and state types, for
+//! the controller). Inside: `world` → `arm`, `geometry`; `controller` → `arm`, `kinematics`;
+//! `arm` → `kinematics`; `kinematics` and `geometry` depend on nothing of the crate but the
+//! scenario's block kinds.
+
+pub mod arm;
+pub mod controller;
+pub mod geometry;
+pub mod kinematics;
+pub mod world;
