@@ -4,8 +4,8 @@
 //!
 //! Depends only on the scenario's data (and the wire contract's command and state types, for
 //! the controller). Inside: `world` → `arm`, `geometry`; `controller` → `arm`, `kinematics`;
-//! `arm` → `kinematics`; `kinematics` and `geometry` depend on nothing of the crate but the
-//! scenario's block kinds.
+//! `arm` → `kinematics`; `kinematics` depends on nothing of the crate, `geometry` only on
+//! the scenario's block kinds.
 
 pub mod arm;
 pub mod controller;
