@@ -3,12 +3,13 @@
 //! [`controller`], stepped by rapier at the scenario's fixed rate.
 //!
 //! Depends only on the scenario's data (and the wire contract's command and state types, for
-//! the controller). Inside: `world` → `arm`, `geometry`; `controller` → `arm`, `kinematics`;
-//! `arm` → `kinematics`; `kinematics` depends on nothing of the crate, `geometry` only on
-//! the scenario's block kinds.
+//! the controller). Inside: `world` → `arm`, `geometry`; `controller` → `arm`, `kinematics`
+//! and `profile` (its motion profile); `arm` → `kinematics`; `kinematics` and `profile` depend
+//! on nothing of the crate, `geometry` only on the scenario's block kinds.
 
 pub mod arm;
 pub mod controller;
 pub mod geometry;
 pub mod kinematics;
+pub mod profile;
 pub mod world;
