@@ -11,13 +11,13 @@ use handeye_wire::{RobotCommand, RobotState};
 
 use crate::cell::arm::ArmReading;
 use crate::cell::controller::{Controller, ControllerConfig};
+use crate::cell::kinematics::{IkError, ToolPose};
+use crate::cell::world::World;
 use crate::events::EventState;
 use crate::referee::judge::{SuccessJudge, Verdict};
-use crate::cell::kinematics::{IkError, ToolPose};
+use crate::render::scene::{Attach, Scene};
 use crate::render::{FrameInput, Sensor};
 use crate::scenario::Scenario;
-use crate::render::scene::{Attach, Scene};
-use crate::cell::world::World;
 
 /// Why a simulator could not be built.
 #[derive(Debug, thiserror::Error)]

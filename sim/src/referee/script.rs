@@ -9,8 +9,8 @@
 use glam::DVec3;
 use handeye_wire::{CommandKind, GripperCommand, RobotCommand, WIRE_VERSION, robot_flags};
 
-use crate::scenario::BlockKind;
 use crate::cell::kinematics::wrap_angle;
+use crate::scenario::BlockKind;
 use crate::simulator::Simulator;
 
 /// Height of the tool point (finger tips) above the table when grasping, metres.
