@@ -6,7 +6,8 @@
 //! Robot frame: metres, z up, origin at the arm's base on the table top. The *tool point* lies
 //! midway between the finger tips. Tool *yaw* is the rotation about z of the gripper when it
 //! points down: at yaw 0 the fingers close along the robot y axis and the gripper's tracked
-//! plate faces +x (towards the cameras in the shipped scenarios).
+//! plate faces +y (its normal is the closing axis; at the shipped scenarios' home yaw of -90°
+//! it faces +x, towards the cameras).
 //!
 //! Joint angles (radians): `q[0]` base yaw about +z (0 = arm along +x); `q[1]` shoulder, the
 //! upper arm's elevation above horizontal; `q[2]` elbow, relative (negative = elbow up, the
