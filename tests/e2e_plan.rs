@@ -46,7 +46,7 @@ fn the_gripper_is_tracked_on_every_frame_while_the_planner_works() {
     assert_eq!(stats.gripper_updates, [stats.frames, stats.frames], "{stats:?}");
     // The chosen facet lies on the block nearest the indicated point (ground truth).
     let target = run.daemon.mission.target.clone().expect("a target from the plan");
-    let (facet, error_px) = handeye_sim::watch::identify_facet(&run.runner.sim, &target.left_px, &target.right_px).expect("a block face");
+    let (facet, error_px) = handeye_sim::referee::watch::identify_facet(&run.runner.sim, &target.left_px, &target.right_px).expect("a block face");
     assert_eq!(facet.block, run.runner.sim.target_index(), "planned facet on block {}", run.runner.sim.world.blocks[facet.block].name);
     assert!(error_px < 3.0, "planned outline {error_px:.1} px off the face");
     assert!(target.depth_m > 0.015 && target.depth_m < 0.055, "planned width {:.1} mm", target.depth_m * 1e3);

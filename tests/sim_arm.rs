@@ -2,8 +2,8 @@
 //! Accuracy is measured on the physical finger bodies, not on what the controller reports.
 
 use handeye_sim::glam::DVec3;
-use handeye_sim::arm::FINGER_TRAVEL_M;
-use handeye_sim::kinematics::{FINGER_LENGTH_M, wrap_angle};
+use handeye_sim::cell::arm::FINGER_TRAVEL_M;
+use handeye_sim::cell::kinematics::{FINGER_LENGTH_M, wrap_angle};
 use handeye_sim::{Scenario, Simulator};
 use handeye_wire::{CommandKind, GripperCommand, NO_FRAME, RejectReason, RobotCommand, WIRE_VERSION, robot_flags};
 
@@ -229,7 +229,7 @@ fn stop_command_halts_and_a_blocked_arm_faults_until_cleared() {
     sim.command(&c);
     d.run_until(&mut sim, 6.0, |f| f & robot_flags::FAULT != 0).expect("blocked arm must fault");
     let s = sim.robot_state();
-    assert_eq!(s.fault, handeye_sim::controller::fault::TRACKING);
+    assert_eq!(s.fault, handeye_sim::cell::controller::fault::TRACKING);
     assert!(s.tool_pos_m[2] > 0.03, "the fingers stopped on the cube top, z = {}", s.tool_pos_m[2]);
     // While faulted, motion is refused; ClearFault is accepted.
     let c = d.cmd(CommandKind::MoveTo, [0.3, 0.0, 0.2], 0.0, 0.0, GripperCommand::Keep);

@@ -3,7 +3,7 @@
 //! (The same check through `handeye sim --lockstep --json` lives with the transport tests.)
 
 use handeye_sim::run::{NoTransport, RunOptions, Runner, run_lockstep};
-use handeye_sim::script::GroundTruthPick;
+use handeye_sim::referee::script::GroundTruthPick;
 use handeye_sim::{Scenario, Simulator};
 
 fn scenario(name: &str) -> Scenario {

@@ -1,12 +1,12 @@
 //! PHYSICS TEST, not a vision result: a scripted pick that reads each block's pose from the
-//! simulator's ground truth ([`handeye_sim::script::GroundTruthPick`]) checks that the arm,
+//! simulator's ground truth ([`handeye_sim::referee::script::GroundTruthPick`]) checks that the arm,
 //! gripper and contact model can pick every shipped block kind, lift it 50 mm and hold it 2 s.
 //! The daemon never gets ground truth; it has to find blocks with its cameras.
 
-use handeye_sim::geometry::BlockKind;
-use handeye_sim::judge::{SuccessJudge, Verdict};
+use handeye_sim::scenario::BlockKind;
+use handeye_sim::referee::judge::{SuccessJudge, Verdict};
 use handeye_sim::scenario::SuccessRule;
-use handeye_sim::script::{GroundTruthPick, Phase};
+use handeye_sim::referee::script::{GroundTruthPick, PickPhase};
 use handeye_sim::{Scenario, Simulator};
 
 fn scenario(name: &str) -> Scenario {
@@ -25,14 +25,14 @@ fn pick(mut scenario: Scenario, block: &str, dyaw_deg: f64, dx_m: f64) -> (Verdi
     let mut judge = SuccessJudge::new(&rule, sim.world.blocks[index].rest_z_m);
     // Lift 70 mm (the rule needs 50) and hold 2.5 s (the rule needs 2).
     let mut script = GroundTruthPick::new(&sim, index, 0.07, 2.5);
-    while !matches!(script.phase, Phase::Done | Phase::Failed) && sim.now_ns() < 30_000_000_000 {
+    while !matches!(script.phase, PickPhase::Done | PickPhase::Failed) && sim.now_ns() < 30_000_000_000 {
         let frame = sim.frames();
         let cmd = script.next_command(&mut sim, frame);
         sim.command(&cmd);
         sim.step_frame();
         judge.observe(sim.now_ns(), sim.block_pose(index).1.translation.z);
     }
-    assert_ne!(script.phase, Phase::Failed, "{block}: the controller refused or faulted: {:?}", sim.robot_state());
+    assert_ne!(script.phase, PickPhase::Failed, "{block}: the controller refused or faulted: {:?}", sim.robot_state());
     (judge.verdict(), judge.max_lift_m)
 }
 
@@ -79,7 +79,7 @@ fn an_open_gripper_lifts_nothing() {
     let index = sim.target_index();
     let mut script = GroundTruthPick::new(&sim, index, 0.07, 1.0);
     let mut max_z: f64 = 0.0;
-    while !matches!(script.phase, Phase::Done | Phase::Failed) && sim.now_ns() < 30_000_000_000 {
+    while !matches!(script.phase, PickPhase::Done | PickPhase::Failed) && sim.now_ns() < 30_000_000_000 {
         let frame = sim.frames();
         let mut cmd = script.next_command(&mut sim, frame);
         cmd.gripper = handeye_wire::GripperCommand::Keep as u32; // never close

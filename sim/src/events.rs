@@ -4,33 +4,10 @@
 
 use glam::DVec3;
 
-use crate::camera::Camera;
-use crate::scenario::{Event, Light, Scenario};
-use crate::world::World;
-
-/// Lighting at one moment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Lighting {
-    /// Unit vector from the scene towards the light.
-    pub direction: DVec3,
-    pub intensity: f64,
-    pub ambient: f64,
-}
-
-impl Lighting {
-    pub fn from_config(l: &Light) -> Self {
-        Self { direction: DVec3::from_array(l.direction).normalize(), intensity: l.intensity, ambient: l.ambient }
-    }
-
-    fn lerp(&self, to: &Self, s: f64) -> Self {
-        let d = self.direction.lerp(to.direction, s);
-        Self {
-            direction: if d.length() > 1e-9 { d.normalize() } else { to.direction },
-            intensity: self.intensity + (to.intensity - self.intensity) * s,
-            ambient: self.ambient + (to.ambient - self.ambient) * s,
-        }
-    }
-}
+use crate::cell::world::World;
+use crate::render::camera::Camera;
+use crate::render::shading::Lighting;
+use crate::scenario::{Event, Scenario, s_to_ns};
 
 /// The state the events change, and which of them have fired.
 #[derive(Debug, Clone)]
@@ -41,11 +18,6 @@ pub struct EventState {
     pub lighting: Lighting,
     /// A lighting ramp under way: (start ns, end ns, from, to).
     ramp: Option<(u64, u64, Lighting, Lighting)>,
-}
-
-/// Seconds to integer nanoseconds.
-pub fn s_to_ns(s: f64) -> u64 {
-    (s * 1e9).round().max(0.0) as u64
 }
 
 impl EventState {

@@ -54,7 +54,7 @@ pub trait Transport {
         false
     }
     /// Appends the daemon's telemetry samples that have arrived (without blocking), for the
-    /// [`DaemonWatch`](crate::watch::DaemonWatch). A transport without telemetry has none.
+    /// [`DaemonWatch`](crate::referee::watch::DaemonWatch). A transport without telemetry has none.
     fn receive_telemetry(&mut self, _out: &mut Vec<Telemetry>) -> Result<(), RunError> {
         Ok(())
     }
@@ -99,13 +99,13 @@ impl Transport for NoTransport {
 }
 
 /// An in-process source of commands that answers every frame (instead of a daemon on the
-/// transport): the ground-truth scripted pick ([`crate::script::GroundTruthPick`]) is one.
+/// transport): the ground-truth scripted pick ([`crate::referee::script::GroundTruthPick`]) is one.
 pub trait Driver {
     /// The command answering frame `frame_id`, or `None` to send nothing.
     fn command(&mut self, sim: &mut Simulator, frame_id: u64) -> Option<RobotCommand>;
 }
 
-impl Driver for crate::script::GroundTruthPick {
+impl Driver for crate::referee::script::GroundTruthPick {
     fn command(&mut self, sim: &mut Simulator, frame_id: u64) -> Option<RobotCommand> {
         Some(self.next_command(sim, frame_id))
     }
@@ -121,7 +121,7 @@ pub struct Runner {
     pub frame_hashes: Vec<u64>,
     pub keep_frame_hashes: bool,
     /// What the daemon claims, judged from ground truth.
-    pub watch: crate::watch::DaemonWatch,
+    pub watch: crate::referee::watch::DaemonWatch,
     ids: Vec<u32>,
     telemetry: Vec<Telemetry>,
 }
@@ -136,7 +136,7 @@ impl Runner {
             hash: FramesHash::default(),
             frame_hashes: Vec::new(),
             keep_frame_hashes: false,
-            watch: crate::watch::DaemonWatch::default(),
+            watch: crate::referee::watch::DaemonWatch::default(),
             ids: Vec::new(),
             telemetry: Vec::new(),
         })
@@ -171,7 +171,7 @@ impl Runner {
         let n = (self.renderer.width() * self.renderer.height()) as usize;
         self.ids.resize(2 * n, 0);
         self.renderer.render_ids(&frame, &mut self.ids)?;
-        let id = crate::scene::block_face_id(block, face);
+        let id = crate::render::scene::block_face_id(block, face);
         Ok([0, 1].map(|v| self.ids[v * n..(v + 1) * n].iter().filter(|&&x| x == id).count() as u32))
     }
 
@@ -250,7 +250,7 @@ pub struct RunStats {
 }
 
 fn done(runner: &Runner, options: &RunOptions, published: u64) -> bool {
-    use crate::judge::Verdict;
+    use crate::referee::judge::Verdict;
     match (options.frames, runner.sim.verdict()) {
         (Some(n), _) => published >= n,
         (None, Verdict::TimedOut) => true,

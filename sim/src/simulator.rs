@@ -9,15 +9,15 @@
 use glam::{DAffine3, DVec3};
 use handeye_wire::{RobotCommand, RobotState};
 
-use crate::arm::ArmReading;
-use crate::controller::{Controller, ControllerConfig};
+use crate::cell::arm::ArmReading;
+use crate::cell::controller::{Controller, ControllerConfig};
+use crate::cell::kinematics::{IkError, ToolPose};
+use crate::cell::world::World;
 use crate::events::EventState;
-use crate::judge::{SuccessJudge, Verdict};
-use crate::kinematics::{IkError, ToolPose};
+use crate::referee::judge::{SuccessJudge, Verdict};
+use crate::render::scene::{Attach, Scene};
 use crate::render::{FrameInput, Sensor};
 use crate::scenario::Scenario;
-use crate::scene::{Attach, Scene};
-use crate::world::World;
 
 /// Why a simulator could not be built.
 #[derive(Debug, thiserror::Error)]

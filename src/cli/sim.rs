@@ -5,9 +5,9 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use handeye_sim::judge::Verdict;
+use handeye_sim::referee::judge::Verdict;
 use handeye_sim::run::{Driver, RunOptions, Runner, run_lockstep, run_realtime};
-use handeye_sim::script::GroundTruthPick;
+use handeye_sim::referee::script::GroundTruthPick;
 use handeye_sim::transport::WireTransport;
 use handeye_sim::{Scenario, Simulator};
 
@@ -131,7 +131,7 @@ pub fn run(args: SimArgs) -> Result<()> {
         stop_on_success: !args.no_stop_on_success,
     };
     if let Some(path) = &args.hint_out {
-        let (hint, facet) = handeye_sim::hint::operator_hint(&runner.sim, runner.sim.scenario.seed)?;
+        let (hint, facet) = handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed)?;
         let text = serde_json::to_string_pretty(&hint)?;
         // Write then rename, so a reader never sees half a file.
         let tmp = path.with_extension("json.tmp");

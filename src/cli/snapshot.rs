@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 use handeye_sim::render::Renderer;
-use handeye_sim::script::GroundTruthPick;
-use handeye_sim::truth::{CageTruth, GroundTruth};
+use handeye_sim::referee::script::GroundTruthPick;
+use handeye_sim::referee::truth::{CageTruth, GroundTruth};
 use handeye_sim::{Scenario, Simulator};
 
 /// Render a scenario's stereo pair to PNGs, with ground truth for testing.

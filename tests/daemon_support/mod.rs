@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use handeye_daemon::{DaemonConfig, HardLoop, OperatorHint};
-use handeye_sim::hint::{operator_hint, HintFacet};
+use handeye_sim::referee::hint::{operator_hint, HintFacet};
 use handeye_sim::run::Runner;
 use handeye_sim::{Scenario, Simulator};
 use handeye_vision::image::ImageView;

@@ -5,7 +5,7 @@
 use std::num::NonZeroU64;
 use std::sync::mpsc;
 
-use super::RenderError;
+use super::error::RenderError;
 
 /// Byte layout of one vertex (robot-frame position, normal, albedo, face id).
 #[repr(C)]

@@ -7,7 +7,7 @@ use std::path::Path;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
-use super::ScenarioError;
+use super::error::ScenarioError;
 
 /// One step of a field path: a table key or an array index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

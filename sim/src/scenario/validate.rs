@@ -1,8 +1,8 @@
 //! Semantic checks of a deserialised scenario (ranges, references between sections, counts);
 //! each failure carries the path of the offending field.
 
+use super::config::{BlockKind, Event, Scenario};
 use super::locate::Seg;
-use super::*;
 
 impl Scenario {
     /// Semantic checks after deserialisation; the error carries the field path.

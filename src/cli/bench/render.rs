@@ -8,7 +8,7 @@ use clap::Args;
 use handeye_sim::run::{Runner, Transport};
 use handeye_sim::transport::WireTransport;
 use handeye_wire::Domain;
-use handeye_sim::script::GroundTruthPick;
+use handeye_sim::referee::script::GroundTruthPick;
 use handeye_sim::{Scenario, Simulator};
 
 /// Measure the simulator's lockstep frame rate: physics + render + publish per stereo frame.

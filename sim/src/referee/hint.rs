@@ -8,8 +8,9 @@
 //! along its normal), front-facing in both views, largest smaller-of-two projected area.
 
 use glam::DVec3;
-pub use handeye_wire::hint::{OperatorHint, HINT_VERSION};
+use handeye_wire::hint::{HINT_VERSION, OperatorHint};
 
+use crate::render::camera::signed_area_px2;
 use crate::rng::SplitMix64;
 use crate::simulator::Simulator;
 
@@ -31,13 +32,13 @@ pub struct HintFacet {
 
 /// Why no hint could be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum HintError {
+pub enum HintFacetError {
     #[error("block '{0}' has no near-vertical face with a parallel opposite face that both cameras see")]
     NoGraspableFacet(String),
 }
 
 /// The hint for the scenario's target as things stand now, with seeded operator errors.
-pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFacet), HintError> {
+pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFacet), HintFacetError> {
     let block = sim.target_index();
     let b = &sim.world.blocks[block];
     let (_, pose) = sim.block_pose(block);
@@ -78,7 +79,7 @@ pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFa
         if views.len() != 2 {
             continue;
         }
-        let area = crate::truth::shoelace(&views[0]).abs().min(crate::truth::shoelace(&views[1]).abs());
+        let area = signed_area_px2(&views[0]).abs().min(signed_area_px2(&views[1]).abs());
         if best.as_ref().is_none_or(|b| area > b.0) {
             let right = views.pop().unwrap_or_default();
             let left = views.pop().unwrap_or_default();
@@ -86,7 +87,7 @@ pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFa
         }
     }
     let Some((_, face, mut left, mut right, depth_m)) = best else {
-        return Err(HintError::NoGraspableFacet(b.name.clone()));
+        return Err(HintFacetError::NoGraspableFacet(b.name.clone()));
     };
     let mut rng = SplitMix64::new(crate::rng::mix64(seed ^ 0x4849_4e54));
     let mut jitter = |v: f64, e: f64| v + (2.0 * rng.next_f64() - 1.0) * e;

@@ -12,8 +12,9 @@
 use glam::{DAffine3, DVec3};
 use serde::Serialize;
 
-use crate::camera::{Camera, CameraInfo};
-use crate::scene::{ID_PLATE, block_face_id, decode_block_face, plate_corners_in_palm};
+use crate::render::camera::{Camera, CameraInfo, signed_area_px2};
+use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
+use crate::render::scene::{ID_PLATE, block_face_id, decode_block_face};
 use crate::simulator::Simulator;
 
 /// One block's pose.
@@ -118,17 +119,11 @@ fn polygon_view(camera: &Camera, corners: &[DVec3], normal: DVec3, visible_px: u
     let polygon_px = projected.unwrap_or_default();
     let centre = corners.iter().copied().sum::<DVec3>() / corners.len().max(1) as f64;
     FaceView {
-        projected_area_px: shoelace(&polygon_px).abs(),
+        projected_area_px: signed_area_px2(&polygon_px).abs(),
         front_facing: normal.dot(camera.position_m - centre) > 0.0,
         polygon_px,
         visible_px,
     }
-}
-
-/// Signed area of a polygon.
-pub fn shoelace(p: &[[f64; 2]]) -> f64 {
-    let n = p.len();
-    (0..n).map(|i| p[i][0] * p[(i + 1) % n][1] - p[(i + 1) % n][0] * p[i][1]).sum::<f64>() / 2.0
 }
 
 /// Pixel counts per face id in each view of a face-id image (left rows, then right rows).
@@ -205,7 +200,7 @@ impl GroundTruth {
         let reading = sim.arm_reading();
         let (palm_pos, palm_rot) = sim.world.body_pose(sim.world.arm.links[4]);
         let plate = plate_corners_in_palm().map(|c| palm_pos + palm_rot * c);
-        let plate_normal = palm_rot * crate::scene::PLATE_NORMAL_IN_PALM;
+        let plate_normal = palm_rot * PLATE_NORMAL_IN_PALM;
         let gripper = GripperTruth {
             tool_m: arr(reading.tool_m),
             yaw_deg: reading.yaw_rad().to_degrees(),

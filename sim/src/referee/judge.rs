@@ -35,8 +35,8 @@ impl SuccessJudge {
         Self {
             rest_z_m,
             lift_m: rule.lift_mm * 1e-3,
-            hold_ns: crate::events::s_to_ns(rule.hold_s),
-            timeout_ns: crate::events::s_to_ns(rule.timeout_s),
+            hold_ns: crate::scenario::s_to_ns(rule.hold_s),
+            timeout_ns: crate::scenario::s_to_ns(rule.timeout_s),
             lifted_since_ns: None,
             max_lift_m: 0.0,
             verdict: Verdict::Pending,

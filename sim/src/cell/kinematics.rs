@@ -1,12 +1,13 @@
 //! Kinematics of the 5-DOF arm (base yaw, shoulder, elbow, wrist pitch, wrist roll): the
 //! dimensions, joint limits, analytic inverse kinematics for a gripper pointing straight down,
-//! and forward kinematics. Pure math in f64; the physical arm in [`crate::arm`] is built from
+//! and forward kinematics. Pure math in f64; the physical arm in [`crate::cell::arm`] is built from
 //! the same constants.
 //!
 //! Robot frame: metres, z up, origin at the arm's base on the table top. The *tool point* lies
 //! midway between the finger tips. Tool *yaw* is the rotation about z of the gripper when it
 //! points down: at yaw 0 the fingers close along the robot y axis and the gripper's tracked
-//! plate faces +x (towards the cameras in the shipped scenarios).
+//! plate faces +y (its normal is the closing axis; at the shipped scenarios' home yaw of -90°
+//! it faces +x, towards the cameras).
 //!
 //! Joint angles (radians): `q[0]` base yaw about +z (0 = arm along +x); `q[1]` shoulder, the
 //! upper arm's elevation above horizontal; `q[2]` elbow, relative (negative = elbow up, the
@@ -76,7 +77,7 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// Joint angles that put the tool point at `pose` with the gripper pointing down (elbow up).
 ///
 /// ```
-/// use handeye_sim::kinematics::{ik, fk, ToolPose};
+/// use handeye_sim::cell::kinematics::{ik, fk, ToolPose};
 /// let pose = ToolPose { pos_m: glam::DVec3::new(0.35, 0.05, 0.03), yaw_rad: 0.3 };
 /// let q = ik(pose).unwrap();
 /// let back = fk(&q);

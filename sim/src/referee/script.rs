@@ -9,8 +9,8 @@
 use glam::DVec3;
 use handeye_wire::{CommandKind, GripperCommand, RobotCommand, WIRE_VERSION, robot_flags};
 
-use crate::geometry::BlockKind;
-use crate::kinematics::wrap_angle;
+use crate::cell::kinematics::wrap_angle;
+use crate::scenario::BlockKind;
 use crate::simulator::Simulator;
 
 /// Height of the tool point (finger tips) above the table when grasping, metres.
@@ -18,8 +18,9 @@ pub const GRASP_TOOL_Z_M: f64 = 0.008;
 /// Clearance above the block's top for the approach, metres.
 pub const APPROACH_CLEARANCE_M: f64 = 0.05;
 
+/// Where the scripted pick is (its own steps, not the daemon's `handeye_wire::Phase`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Phase {
+pub enum PickPhase {
     Approach,
     Descend,
     Close,
@@ -34,7 +35,7 @@ pub enum Phase {
 #[derive(Debug, Clone)]
 pub struct GroundTruthPick {
     pub block: usize,
-    pub phase: Phase,
+    pub phase: PickPhase,
     /// Tool pose at the grasp.
     pub grasp_m: DVec3,
     pub grasp_yaw_rad: f64,
@@ -80,11 +81,11 @@ impl GroundTruthPick {
             .unwrap_or(yaw);
         Self {
             block,
-            phase: Phase::Approach,
+            phase: PickPhase::Approach,
             grasp_m: DVec3::new(centre.x, centre.y, GRASP_TOOL_Z_M),
             grasp_yaw_rad: yaw,
             lift_m,
-            hold_ns: crate::events::s_to_ns(hold_s),
+            hold_ns: crate::scenario::s_to_ns(hold_s),
             phase_start_ns: sim.now_ns(),
             sent_move: false,
             seq: 0,
@@ -106,7 +107,7 @@ impl GroundTruthPick {
         }
     }
 
-    fn next_phase(&mut self, phase: Phase, now_ns: u64) {
+    fn next_phase(&mut self, phase: PickPhase, now_ns: u64) {
         self.phase = phase;
         self.phase_start_ns = now_ns;
         self.sent_move = false;
@@ -117,52 +118,52 @@ impl GroundTruthPick {
         let state = sim.robot_state();
         let now = sim.now_ns();
         let hold = |s: &mut Self| s.make(CommandKind::Hold, DVec3::ZERO, 0.0, GripperCommand::Keep, frame_id);
-        if state.flags & (robot_flags::FAULT | robot_flags::REJECTED) != 0 && self.phase != Phase::Done {
-            self.phase = Phase::Failed;
+        if state.flags & (robot_flags::FAULT | robot_flags::REJECTED) != 0 && self.phase != PickPhase::Done {
+            self.phase = PickPhase::Failed;
         }
         let arrived = state.flags & robot_flags::ARRIVED != 0;
         let top_z = sim.world.blocks[self.block].shape.size_m.z;
         let above = DVec3::new(self.grasp_m.x, self.grasp_m.y, top_z + APPROACH_CLEARANCE_M);
         let elapsed = now.saturating_sub(self.phase_start_ns);
         match self.phase {
-            Phase::Approach | Phase::Descend | Phase::Lift => {
+            PickPhase::Approach | PickPhase::Descend | PickPhase::Lift => {
                 if !self.sent_move {
                     self.sent_move = true;
                     let (target, gripper) = match self.phase {
-                        Phase::Approach => (above, GripperCommand::Open),
-                        Phase::Descend => (self.grasp_m, GripperCommand::Keep),
+                        PickPhase::Approach => (above, GripperCommand::Open),
+                        PickPhase::Descend => (self.grasp_m, GripperCommand::Keep),
                         _ => (self.grasp_m + DVec3::Z * self.lift_m, GripperCommand::Keep),
                     };
                     return self.make(CommandKind::MoveTo, target, self.grasp_yaw_rad, gripper, frame_id);
                 }
                 if arrived {
                     let next = match self.phase {
-                        Phase::Approach => Phase::Descend,
-                        Phase::Descend => Phase::Close,
-                        _ => Phase::Hold,
+                        PickPhase::Approach => PickPhase::Descend,
+                        PickPhase::Descend => PickPhase::Close,
+                        _ => PickPhase::Hold,
                     };
                     self.next_phase(next, now);
-                    if next == Phase::Close {
+                    if next == PickPhase::Close {
                         self.sent_move = true;
                         return self.make(CommandKind::Hold, DVec3::ZERO, 0.0, GripperCommand::Close, frame_id);
                     }
                 }
                 hold(self)
             }
-            Phase::Close => {
+            PickPhase::Close => {
                 // Let the jaws close and settle (at least 0.5 s).
                 if elapsed >= 500_000_000 && state.flags & robot_flags::GRIPPER_SETTLED != 0 {
-                    self.next_phase(Phase::Lift, now);
+                    self.next_phase(PickPhase::Lift, now);
                 }
                 hold(self)
             }
-            Phase::Hold => {
+            PickPhase::Hold => {
                 if elapsed >= self.hold_ns {
-                    self.next_phase(Phase::Done, now);
+                    self.next_phase(PickPhase::Done, now);
                 }
                 hold(self)
             }
-            Phase::Done | Phase::Failed => hold(self),
+            PickPhase::Done | PickPhase::Failed => hold(self),
         }
     }
 }

@@ -153,6 +153,14 @@ pub struct CameraInfo {
     pub pixel_from_robot: [[f64; 4]; 3],
 }
 
+/// Signed area of a polygon in the image (the shoelace formula over its corners in order),
+/// pixels²; its sign says which way the corners wind.
+pub fn signed_area_px2(polygon_px: &[[f64; 2]]) -> f64 {
+    let p = polygon_px;
+    let n = p.len();
+    (0..n).map(|i| p[i][0] * p[(i + 1) % n][1] - p[(i + 1) % n][0] * p[i][1]).sum::<f64>() / 2.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

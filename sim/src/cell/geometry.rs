@@ -7,43 +7,8 @@
 //! rests on its bottom face; `size = [x, y, z]` is the bounding box.
 
 use glam::DVec3;
-use serde::{Deserialize, Serialize};
 
-/// The kinds of block a scenario may place.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum BlockKind {
-    /// All three sides equal.
-    Cube,
-    /// A cuboid with sides of any length.
-    Bar,
-    /// A right triangular prism: the triangle lies in the x-z plane (bottom along x, vertical
-    /// back side at +x, slope rising from -x to +x), extruded along y.
-    Wedge,
-    /// An L-shaped prism: the L lies in the x-z plane (a low leg of half height over the whole
-    /// length, a tall leg over the +x half), extruded along y.
-    LBlock,
-}
-
-impl BlockKind {
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Cube => "cube",
-            Self::Bar => "bar",
-            Self::Wedge => "wedge",
-            Self::LBlock => "l_block",
-        }
-    }
-
-    /// Number of faces of this kind (length of a scenario's `shades` list).
-    pub fn face_count(self) -> usize {
-        match self {
-            Self::Cube | Self::Bar => 6,
-            Self::Wedge => 5,
-            Self::LBlock => 8,
-        }
-    }
-}
+use crate::scenario::BlockKind;
 
 /// One planar face of a block.
 #[derive(Debug, Clone)]

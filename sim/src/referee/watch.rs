@@ -35,7 +35,8 @@ use glam::DVec3;
 use handeye_wire::{CommandKind, Phase, RobotCommand, Telemetry};
 use serde::Serialize;
 
-use crate::hint::HintFacet;
+use crate::referee::hint::HintFacet;
+use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
 use crate::simulator::Simulator;
 
 /// The gripper's placement when the servo converged, from ground truth.
@@ -247,9 +248,9 @@ impl DaemonWatch {
         let mid = centre - n * (facet.depth_m / 2.0);
         let reading = sim.arm_reading();
         let tool = reading.tool_m;
-        let plate_normal = (reading.palm_rot * crate::scene::PLATE_NORMAL_IN_PALM).normalize();
+        let plate_normal = (reading.palm_rot * PLATE_NORMAL_IN_PALM).normalize();
         let (palm_pos, palm_rot) = sim.world.body_pose(sim.world.arm.links[4]);
-        let plate_centre = crate::scene::plate_corners_in_palm().iter().map(|&c| palm_pos + palm_rot * c).sum::<DVec3>() / 4.0;
+        let plate_centre = plate_corners_in_palm().iter().map(|&c| palm_pos + palm_rot * c).sum::<DVec3>() / 4.0;
         let plate_offset = n.dot(plate_centre - centre);
         let offset = n.dot(tool - mid);
         let horizontal = n.cross(DVec3::Z).normalize_or_zero();

@@ -4,9 +4,8 @@
 use glam::{DMat3, DQuat, DVec3, Vec3};
 use rapier3d::prelude::*;
 
-use crate::arm::{self, Arm, groups};
-use crate::geometry::BlockShape;
-use crate::rng::SplitMix64;
+use crate::cell::arm::{self, Arm, groups};
+use crate::cell::geometry::BlockShape;
 use crate::scenario::{BlockConfig, Scenario};
 
 /// Contact stiffness (natural frequency, Hz) and damping ratio between dynamic bodies; twice
@@ -94,25 +93,11 @@ impl World {
     }
 }
 
-/// Default face shades: well-spread levels in a seeded order, so neighbouring faces differ.
-pub fn random_shades(seed: u64, count: usize) -> Vec<f64> {
-    let mut rng = SplitMix64::new(seed);
-    let mut levels: Vec<f64> = (0..count).map(|i| 0.35 + 0.6 * i as f64 / (count.max(2) - 1) as f64).collect();
-    for i in (1..levels.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        levels.swap(i, j);
-    }
-    levels
-}
-
 fn insert_block(physics: &mut PhysicsWorld, scenario: &Scenario, index: usize, b: &BlockConfig) -> Block {
     let size = DVec3::from_array(b.size_mm) * 1e-3;
     let shape = BlockShape::new(b.kind, size);
     let rest_z_m = size.z / 2.0;
-    let shades = match &b.shades {
-        Some(s) => s.clone(),
-        None => random_shades(b.shade_seed.unwrap_or_else(|| crate::rng::mix64(scenario.seed ^ (index as u64 + 1))), shape.faces.len()),
-    };
+    let shades = b.face_shades(index, scenario.seed);
     let rot = DQuat::from_rotation_z(b.yaw_deg.to_radians());
     let body = physics.insert_body(
         // Blocks never sleep: a sleeping block squeezed by the fingers (a multibody) slid out

@@ -1,6 +1,6 @@
 //! The physical arm: a rapier multibody (reduced coordinates) of five revolute joints with
 //! position motors and a parallel-jaw gripper of two prismatic fingers with force-limited
-//! motors, built from the dimensions in [`crate::kinematics`].
+//! motors, built from the dimensions in [`crate::cell::kinematics`].
 //!
 //! Body frames at the joint zero configuration are all aligned with the robot frame (the arm
 //! stretched along +x, the gripper pointing along +x); see `kinematics` for the joint
@@ -19,7 +19,7 @@
 use glam::{DMat3, DQuat, DVec3, Quat, Vec3};
 use rapier3d::prelude::*;
 
-use crate::kinematics::{self, FINGER_LENGTH_M, PALM_LENGTH_M, WRIST_LINK_M};
+use crate::cell::kinematics::{self, FINGER_LENGTH_M, PALM_LENGTH_M, WRIST_LINK_M};
 
 /// Collision groups of the work cell.
 pub mod groups {

@@ -1,0 +1,16 @@
+//! Ground truth and judging, from the simulator's own state and never published to the
+//! daemon: the poses and projections a test checks against ([`truth`]), the success rule
+//! ([`judge`]), the operator hint an operator would give the daemon ([`hint`]: the *generator*;
+//! the hint's format is the wire contract's `handeye_wire::hint`), what the daemon claims,
+//! judged from ground truth ([`watch`]), and a scripted pick that reads ground truth to check
+//! that the arm can pick a block at all ([`script`]).
+//!
+//! Depends on the simulator (which it reads) and on the renderer's camera model and face ids;
+//! the simulator depends only on [`judge`] (it judges success every step). Inside: `watch` →
+//! `hint` → `truth`; `judge` and `script` stand alone.
+
+pub mod hint;
+pub mod judge;
+pub mod script;
+pub mod truth;
+pub mod watch;
