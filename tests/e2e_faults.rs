@@ -39,7 +39,7 @@ fn handeye(args: &[&str], dir: &Path, name: &str) -> Kid {
 fn start_pair(dir: &Path, domain: &Domain, sim_extra: &[&str]) -> (Kid, Kid) {
     let hint = dir.join("hint.json");
     let sc = scenario_without_antialias("pick_cube.toml", dir);
-    let mut args = vec!["sim", sc.to_str().unwrap(), "--lockstep", "--domain", domain.name(), "--wait-daemon-ms", "30000", "--hint-out", hint.to_str().unwrap()];
+    let mut args = vec!["sim", sc.to_str().unwrap(), "--lockstep", "--domain", domain.name(), "--wait-daemon-s", "30", "--hint-out", hint.to_str().unwrap()];
     args.extend_from_slice(sim_extra);
     let sim = handeye(&args, dir, "sim");
     let t0 = Instant::now();
@@ -170,7 +170,7 @@ fn killing_the_daemon_lets_the_watchdog_stop_the_arm() {
     let _one = one_at_a_time();
     // A short reply time-out: with the daemon gone, lockstep frames do not wait long.
     let Setup { domain, _node, tel: _tel, cmds: _cmds, mut states, sim: _sim, mut daemon, dir: _dir } =
-        start_and_reach("killdaemon", &["--reply-timeout-ms", "100"], "calibration", |t| t.phase == Phase::Calibrate as u32);
+        start_and_reach("killdaemon", &["--reply-timeout-s", "0.1"], "calibration", |t| t.phase == Phase::Calibrate as u32);
     // Kill it while the arm is moving between cage points.
     let t0 = Instant::now();
     loop {

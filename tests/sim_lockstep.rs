@@ -79,7 +79,7 @@ fn lockstep_waits_for_the_daemon_and_follows_its_commands() {
     let mut states = MessageSubscriber::<RobotState>::create(&node).expect("state subscriber");
 
     let child = Command::new(BIN)
-        .args(["sim", &scenario("pick_cube.toml"), "--lockstep", "--frames", "60", "--reply-timeout-ms", "5000", "--json"])
+        .args(["sim", &scenario("pick_cube.toml"), "--lockstep", "--frames", "60", "--reply-timeout-s", "5", "--json"])
         .args(["--domain", d.0.name()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -141,7 +141,7 @@ fn lockstep_times_out_on_unanswered_frames_and_goes_on() {
     // A command publisher that never answers.
     let _commands = MessagePublisher::<RobotCommand>::create(&node).expect("command publisher");
     let start = Instant::now();
-    let report = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "5", "--reply-timeout-ms", "100"], &d.0);
+    let report = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "5", "--reply-timeout-s", "0.1"], &d.0);
     assert_eq!(report["frames"], 5);
     assert_eq!(report["reply_timeouts"], 5, "{report}");
     assert!(start.elapsed() >= Duration::from_millis(500), "it waited for each frame");

@@ -12,6 +12,7 @@ pub mod hint;
 pub mod judge;
 pub mod kinematics;
 pub mod render;
+pub mod report;
 pub mod rng;
 pub mod run;
 pub mod scenario;

@@ -1,5 +1,5 @@
 //! `handeye batch`: many closed-loop runs (`handeye run` on seeded random layouts), a
-//! progress bar, a success-rate table with the failures by phase and reason, and a report
+//! progress bar, a success-rate table with the failures by phase and kind, and a report
 //! page per run.
 
 use std::collections::BTreeMap;
@@ -12,7 +12,10 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use serde_json::{json, Value};
+use handeye_wire::report::{Failure, FailureKind};
+
+use super::units::parse_seconds;
+use super::report::{as_json, BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, RunDetail, RunSummary};
 
 /// Run many closed-loop grasp scenarios and report how often they succeed.
 ///
@@ -27,14 +30,16 @@ use serde_json::{json, Value};
 /// A progress bar runs on stderr (one line per finished run when stderr is not a
 /// terminal). Then a table on stdout: per scenario the runs, successes, success rate,
 /// median servo steps (successful runs) and median wall time per run; the failures grouped
-/// by the phase they ended in and their reason (numbers in reasons replaced by #, the seeds
-/// listed); the total wall time.
+/// by the phase they happened in and their kind (not_converged, no_grasp_site, wrong_target,
+/// ...: the `failure` of `handeye run --json`), each group's runs listed with their reasons
+/// in full; the total wall time.
 ///
 /// With --json, one object instead: runs, successes, success_rate, failures (phase →
-/// reason → count), failed_runs (scenario, seed, phase, reason in full), median_servo_steps,
-/// median_run_wall_s, wall_s, scenarios (the same per scenario), daemon_config (the
-/// --config file or null), and every run's summary (runs_detail: what `handeye run --json`
-/// printed).
+/// kind → count), failure_list (per group: phase, kind, count, runs: run "scenario#seed" and
+/// its reason), failed_runs (scenario, seed, phase reached, reason in full, failure: phase,
+/// kind, detail), median_servo_steps, median_run_wall_s, wall_s, scenarios (the same per
+/// scenario), daemon_config (the --config file or null), and every run's summary
+/// (runs_detail: what `handeye run --json` printed, null when it printed nothing).
 ///
 /// With --out DIR: DIR/index.html (the table, a row per run linking its page) and, per run,
 /// DIR/<scenario>/seed-<S>/ with `handeye run`'s report (overlays of the tracked contours at
@@ -72,7 +77,7 @@ pub struct BatchArgs {
     #[arg(long)]
     hint: bool,
     /// Kill a run after this many seconds of wall time (`handeye run --timeout-s`).
-    #[arg(long, default_value_t = 300.0, value_name = "S")]
+    #[arg(long, default_value_t = 300.0, value_name = "S", value_parser = parse_seconds)]
     timeout_s: f64,
     /// Daemon configuration (TOML) for every run (`handeye run --config`), e.g. to compare
     /// tracker settings over the same layouts. Checked before the first run starts.
@@ -102,10 +107,18 @@ struct Outcome {
     success: bool,
     /// The working phase the run got to (`run` when `handeye run` itself failed).
     phase: String,
-    reason: Option<String>,
+    /// Why it failed (`None` when it lifted).
+    failure: Option<Failure>,
     servo_steps: Option<f64>,
     wall_s: f64,
-    summary: Value,
+    /// What `handeye run --json` printed (`None`: nothing usable).
+    summary: Option<RunSummary>,
+}
+
+impl Outcome {
+    fn reason(&self) -> Option<&str> {
+        self.failure.as_ref().map(|f| f.detail.as_str())
+    }
 }
 
 fn scenario_name(path: &Path) -> Result<String> {
@@ -131,24 +144,6 @@ fn collect_scenarios(path: &Path) -> Result<Vec<PathBuf>> {
     } else {
         bail!("{}: no such scenario file or folder", path.display())
     }
-}
-
-/// A reason with its numbers replaced by `#`, so that runs failing the same way group.
-pub fn reason_class(reason: &str) -> String {
-    let mut out = String::with_capacity(reason.len());
-    let mut chars = reason.chars().peekable();
-    while let Some(c) = chars.next() {
-        let starts_number = c.is_ascii_digit() || ((c == '-' || c == '.') && chars.peek().is_some_and(|d| d.is_ascii_digit()) && !out.ends_with(|p: char| p.is_alphanumeric()));
-        if starts_number {
-            while chars.peek().is_some_and(|d| d.is_ascii_digit() || *d == '.' || *d == 'e' || *d == '-') {
-                chars.next();
-            }
-            out.push('#');
-        } else {
-            out.push(c);
-        }
-    }
-    out
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -192,30 +187,37 @@ fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
         job: job.clone(),
         success: false,
         phase: "run".into(),
-        reason: Some(reason),
+        failure: Some(Failure::new("run", FailureKind::Process, reason)),
         servo_steps: None,
         wall_s: start.elapsed().as_secs_f64(),
-        summary: Value::Null,
+        summary: None,
     };
     let output = match exe.and_then(|exe| Command::new(exe).args(&cmd_args).stdin(Stdio::null()).output()) {
         Ok(o) => o,
         Err(e) => return failed(format!("cannot start handeye run: {e}")),
     };
     let stdout = String::from_utf8_lossy(&output.stdout);
-    let Some(summary) = stdout.lines().rev().find(|l| l.starts_with('{')).and_then(|l| serde_json::from_str::<Value>(l).ok()) else {
+    let Some(line) = stdout.lines().rev().find(|l| l.starts_with('{')) else {
         return failed(format!("handeye run gave no result: {}", tail(&String::from_utf8_lossy(&output.stderr), 2)));
     };
-    let success = summary["success"] == true;
+    let summary = match serde_json::from_str::<RunSummary>(line) {
+        Ok(s) => s,
+        // A summary that does not read is a broken contract between the two commands: said
+        // with the field, not read as "no value".
+        Err(e) => return failed(format!("handeye run's summary does not read: {e}")),
+    };
+    let success = summary.success;
     // The working phase the run got to (its final phase is just `failed` or `stopped`).
-    let phase = summary["phase_reached"].as_str().unwrap_or("unknown").to_string();
+    let phase = summary.phase_reached.clone().unwrap_or_else(|| "unknown".to_string());
+    let failure = (!success).then(|| summary.failure.clone().unwrap_or_else(|| Failure::new(phase.clone(), FailureKind::Process, "no reason given")));
     Outcome {
         job: job.clone(),
         success,
         phase: if success { "done".into() } else { phase },
-        reason: if success { None } else { Some(summary["failure_reason"].as_str().unwrap_or("no reason given").to_string()) },
-        servo_steps: summary["servo_steps"].as_f64(),
-        wall_s: summary["wall_s"].as_f64().unwrap_or_else(|| start.elapsed().as_secs_f64()),
-        summary,
+        failure,
+        servo_steps: summary.servo_steps.map(f64::from),
+        wall_s: summary.wall_s,
+        summary: Some(summary),
     }
 }
 
@@ -274,7 +276,7 @@ pub fn run(args: BatchArgs) -> Result<()> {
                     o.job.name,
                     o.job.seed,
                     if o.success { "lifted" } else { "FAILED" },
-                    o.reason.as_ref().map(|r| format!(" in {}: {r}", o.phase)).unwrap_or_default()
+                    o.reason().map(|r| format!(" in {}: {r}", o.phase)).unwrap_or_default()
                 );
                 if bar.is_hidden() {
                     eprintln!("{line}");
@@ -295,14 +297,13 @@ pub fn run(args: BatchArgs) -> Result<()> {
     outcomes.sort_by_key(|(i, _)| *i);
     let outcomes: Vec<Outcome> = outcomes.into_iter().map(|(_, o)| o).collect();
     let wall_s = start.elapsed().as_secs_f64();
-    let mut report = summarise(&outcomes, wall_s);
-    report["daemon_config"] = args.config.as_ref().map_or(Value::Null, |c| Value::String(c.display().to_string()));
+    let report = summarise(&outcomes, wall_s, args.config.as_ref().map(|c| c.display().to_string()));
     if let Some(out) = &args.out {
         std::fs::write(out.join("batch.json"), serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", out.join("batch.json").display()))?;
         write_pages(out, &outcomes, &report)?;
     }
     if args.json {
-        println!("{report}");
+        println!("{}", serde_json::to_string(&report)?);
     } else {
         print!("{}", table(&report));
         if let Some(out) = &args.out {
@@ -315,84 +316,113 @@ pub fn run(args: BatchArgs) -> Result<()> {
     Ok(())
 }
 
-fn group(outcomes: &[&Outcome], wall_s: Option<f64>) -> Value {
+/// Counts and medians over `outcomes`; failures grouped by the phase they happened in and
+/// their kind.
+fn group(outcomes: &[&Outcome], wall_s: Option<f64>) -> BatchGroup {
     let runs = outcomes.len();
     let successes = outcomes.iter().filter(|o| o.success).count();
-    let mut failures: BTreeMap<String, BTreeMap<String, u64>> = BTreeMap::new();
-    let mut seeds: BTreeMap<(String, String), Vec<String>> = BTreeMap::new();
-    for o in outcomes.iter().filter(|o| !o.success) {
-        let class = reason_class(o.reason.as_deref().unwrap_or(""));
-        *failures.entry(o.phase.clone()).or_default().entry(class.clone()).or_insert(0) += 1;
-        seeds.entry((o.phase.clone(), class)).or_default().push(format!("{}#{}", o.job.name, o.job.seed));
+    let mut groups: BTreeMap<(String, FailureKind), Vec<GroupRun>> = BTreeMap::new();
+    for o in outcomes {
+        if let Some(f) = &o.failure {
+            groups.entry((f.phase.clone(), f.kind)).or_default().push(GroupRun { run: format!("{}#{}", o.job.name, o.job.seed), reason: f.detail.clone() });
+        }
     }
-    let failure_list: Vec<Value> = seeds.into_iter().map(|((phase, reason), runs)| json!({ "phase": phase, "reason": reason, "count": runs.len(), "runs": runs })).collect();
-    json!({
-        "runs": runs,
-        "successes": successes,
-        "success_rate": if runs > 0 { successes as f64 / runs as f64 } else { 0.0 },
-        "failures": failures,
-        "failure_list": failure_list,
-        "median_servo_steps": median(outcomes.iter().filter(|o| o.success).filter_map(|o| o.servo_steps).collect()),
-        "median_run_wall_s": median(outcomes.iter().map(|o| o.wall_s).collect()),
-        "wall_s": wall_s,
-    })
+    let mut failures: BTreeMap<String, BTreeMap<FailureKind, usize>> = BTreeMap::new();
+    for ((phase, kind), runs) in &groups {
+        failures.entry(phase.clone()).or_default().insert(*kind, runs.len());
+    }
+    BatchGroup {
+        runs,
+        successes,
+        success_rate: if runs > 0 { successes as f64 / runs as f64 } else { 0.0 },
+        failures,
+        failure_list: groups.into_iter().map(|((phase, kind), runs)| FailureGroup { phase, kind, count: runs.len(), runs }).collect(),
+        median_servo_steps: median(outcomes.iter().filter(|o| o.success).filter_map(|o| o.servo_steps).collect()),
+        median_run_wall_s: median(outcomes.iter().map(|o| o.wall_s).collect()),
+        wall_s,
+    }
 }
 
-fn summarise(outcomes: &[Outcome], wall_s: f64) -> Value {
+fn summarise(outcomes: &[Outcome], wall_s: f64, daemon_config: Option<String>) -> BatchResult {
     let all: Vec<&Outcome> = outcomes.iter().collect();
-    let mut report = group(&all, Some(wall_s));
     let mut names: Vec<&str> = outcomes.iter().map(|o| o.job.name.as_str()).collect();
     names.dedup();
-    let scenarios: serde_json::Map<String, Value> =
-        names.iter().map(|n| (n.to_string(), group(&outcomes.iter().filter(|o| o.job.name == *n).collect::<Vec<_>>(), None))).collect();
-    report["scenarios"] = Value::Object(scenarios);
-    report["failed_runs"] = outcomes
-        .iter()
-        .filter(|o| !o.success)
-        .map(|o| json!({ "scenario": o.job.name, "seed": o.job.seed, "phase": o.phase, "reason": o.reason }))
-        .collect();
-    report["runs_detail"] = outcomes.iter().map(|o| json!({ "scenario": o.job.name, "seed": o.job.seed, "summary": o.summary })).collect();
-    report
+    BatchResult {
+        all: group(&all, Some(wall_s)),
+        scenarios: names.iter().map(|n| (n.to_string(), group(&outcomes.iter().filter(|o| o.job.name == *n).collect::<Vec<_>>(), None))).collect(),
+        failed_runs: outcomes
+            .iter()
+            .filter_map(|o| {
+                let failure = o.failure.clone()?;
+                Some(FailedRun { scenario: o.job.name.clone(), seed: o.job.seed, phase: o.phase.clone(), reason: failure.detail.clone(), failure })
+            })
+            .collect(),
+        runs_detail: outcomes.iter().map(|o| RunDetail { scenario: o.job.name.clone(), seed: o.job.seed, summary: o.summary.clone() }).collect(),
+        daemon_config,
+    }
 }
 
-fn table(report: &Value) -> String {
+fn table(report: &BatchResult) -> String {
     use std::fmt::Write;
     let mut s = String::new();
-    let f = |v: &Value, unit: &str| v.as_f64().map_or("-".to_string(), |x| format!("{x:.1}{unit}"));
+    let f = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |x| format!("{x:.1}{unit}"));
     let _ = writeln!(s, "{:<24} {:>5} {:>9} {:>8} {:>12} {:>10}", "scenario", "runs", "lifted", "rate", "servo steps", "run wall");
-    if let Some(scenarios) = report["scenarios"].as_object() {
-        for (name, g) in scenarios {
-            let _ = writeln!(
-                s,
-                "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
-                name,
-                g["runs"].as_u64().unwrap_or(0),
-                g["successes"].as_u64().unwrap_or(0),
-                100.0 * g["success_rate"].as_f64().unwrap_or(0.0),
-                f(&g["median_servo_steps"], ""),
-                f(&g["median_run_wall_s"], " s")
-            );
+    let row = |s: &mut String, name: &str, g: &BatchGroup| {
+        let _ = writeln!(
+            s,
+            "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
+            name,
+            g.runs,
+            g.successes,
+            100.0 * g.success_rate,
+            f(g.median_servo_steps, ""),
+            f(g.median_run_wall_s, " s")
+        );
+    };
+    for (name, g) in &report.scenarios {
+        row(&mut s, name, g);
+    }
+    row(&mut s, "all", &report.all);
+    if !report.all.failure_list.is_empty() {
+        let _ = writeln!(s, "\nfailures by phase and kind:");
+        for g in &report.all.failure_list {
+            let runs: Vec<&str> = g.runs.iter().map(|r| r.run.as_str()).collect();
+            let _ = writeln!(s, "  {:>3} x {}: {} ({})", g.count, g.phase, g.kind, runs.join(", "));
+            for r in &g.runs {
+                let _ = writeln!(s, "          {}: {}", r.run, r.reason);
+            }
         }
     }
-    let _ = writeln!(
-        s,
-        "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
-        "all",
-        report["runs"].as_u64().unwrap_or(0),
-        report["successes"].as_u64().unwrap_or(0),
-        100.0 * report["success_rate"].as_f64().unwrap_or(0.0),
-        f(&report["median_servo_steps"], ""),
-        f(&report["median_run_wall_s"], " s")
-    );
-    if let Some(list) = report["failure_list"].as_array().filter(|l| !l.is_empty()) {
-        let _ = writeln!(s, "\nfailures by phase and reason:");
-        for fl in list {
-            let runs: Vec<&str> = fl["runs"].as_array().map(|r| r.iter().filter_map(Value::as_str).collect()).unwrap_or_default();
-            let _ = writeln!(s, "  {:>3} x {}: {} ({})", fl["count"].as_u64().unwrap_or(0), fl["phase"].as_str().unwrap_or("?"), fl["reason"].as_str().unwrap_or("?"), runs.join(", "));
-        }
-    }
-    let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report["wall_s"].as_f64().unwrap_or(0.0));
+    let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report.all.wall_s.unwrap_or(0.0));
     s
+}
+
+/// The run page's table: a summary's fields as its JSON shows them (`null` throughout when
+/// the run printed none).
+fn page_rows(s: Option<&RunSummary>) -> Vec<(&'static str, String)> {
+    let field = |f: &dyn Fn(&RunSummary) -> String| s.map_or_else(|| "null".to_string(), f);
+    vec![
+        ("target_block", field(&|s| as_json(&s.target_block))),
+        ("targeted_block", field(&|s| as_json(&s.targeted_block))),
+        ("targeted_face", field(&|s| as_json(&s.targeted_face))),
+        ("indicated_point_m", field(&|s| as_json(&s.indicated_point_m))),
+        ("plan_facets", field(&|s| as_json(&s.plan_facets))),
+        ("plan_candidates", field(&|s| as_json(&s.plan_candidates))),
+        ("plan_width_mm", field(&|s| as_json(&s.plan_width_mm))),
+        ("planner_ms", field(&|s| as_json(&s.planner_ms))),
+        ("planning_frames", field(&|s| as_json(&s.planning_frames))),
+        ("gripper_updates_while_planning", field(&|s| as_json(&s.gripper_updates_while_planning))),
+        ("servo_steps", field(&|s| as_json(&s.servo_steps))),
+        ("final_plane_error_mm", field(&|s| as_json(&s.final_plane_error_mm))),
+        ("final_angle_error_deg", field(&|s| as_json(&s.final_angle_error_deg))),
+        ("grasp_plane_error_mm", field(&|s| as_json(&s.grasp_plane_error_mm))),
+        ("max_lift_mm", field(&|s| as_json(&s.max_lift_mm))),
+        ("loop_us_p50", field(&|s| as_json(&s.loop_us_p50))),
+        ("loop_us_p99", field(&|s| as_json(&s.loop_us_p99))),
+        ("calibration_residual_px", field(&|s| as_json(&s.calibration_residual_px))),
+        ("sim_frames", field(&|s| as_json(&s.sim_frames))),
+        ("wall_s", field(&|s| as_json(&s.wall_s))),
+    ]
 }
 
 fn esc(text: &str) -> String {
@@ -400,14 +430,15 @@ fn esc(text: &str) -> String {
 }
 
 /// The report pages: DIR/index.html and one page per run (see `BatchArgs`).
-fn write_pages(out: &Path, outcomes: &[Outcome], report: &Value) -> Result<()> {
+fn write_pages(out: &Path, outcomes: &[Outcome], report: &BatchResult) -> Result<()> {
     use std::fmt::Write;
     let style = "<style>body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:left}.ok{color:#070}.bad{color:#b00}img{max-width:100%;border:1px solid #ccc;margin:4px 0}</style>";
     let mut index = format!("<!doctype html><meta charset=utf-8><title>handeye batch</title>{style}<h1>handeye batch</h1><pre>{}</pre>", esc(&table(report)));
     let _ = write!(index, "<table><tr><th>scenario</th><th>seed</th><th>result</th><th>phase</th><th>reason</th><th>target</th><th>grasped facet</th><th>servo steps</th><th>wall (s)</th></tr>");
     for o in outcomes {
         let rel = format!("{}/seed-{}/index.html", o.job.name, o.job.seed);
-        let s = &o.summary;
+        let s = o.summary.as_ref();
+        let text = |field: fn(&RunSummary) -> &Option<String>| s.and_then(|s| field(s).clone()).unwrap_or_default();
         let _ = write!(
             index,
             "<tr><td>{}</td><td><a href=\"{rel}\">{}</a></td><td class={}>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} {}</td><td>{}</td><td>{:.1}</td></tr>",
@@ -416,11 +447,11 @@ fn write_pages(out: &Path, outcomes: &[Outcome], report: &Value) -> Result<()> {
             if o.success { "ok" } else { "bad" },
             if o.success { "lifted" } else { "failed" },
             esc(&o.phase),
-            esc(o.reason.as_deref().unwrap_or("")),
-            esc(s["target_block"].as_str().unwrap_or("")),
-            esc(s["targeted_block"].as_str().unwrap_or("")),
-            esc(s["targeted_face"].as_str().unwrap_or("")),
-            s["servo_steps"],
+            esc(o.reason().unwrap_or("")),
+            esc(&text(|s| &s.target_block)),
+            esc(&text(|s| &s.targeted_block)),
+            esc(&text(|s| &s.targeted_face)),
+            as_json(&s.and_then(|s| s.servo_steps)),
             o.wall_s
         );
         if let Some(dir) = &o.job.out {
@@ -441,7 +472,6 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
         .filter(|n| n.ends_with(".png") && n.chars().next().is_some_and(|c| c.is_ascii_digit()))
         .collect();
     pngs.sort();
-    let s = &o.summary;
     let mut page = format!(
         "<!doctype html><meta charset=utf-8><title>{} seed {}</title>{style}<p><a href=\"../../index.html\">batch</a></p><h1>{} seed {}: <span class={}>{}</span></h1>",
         esc(&o.job.name),
@@ -451,33 +481,12 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
         if o.success { "ok" } else { "bad" },
         if o.success { "lifted and held" } else { "failed" }
     );
-    if let Some(r) = &o.reason {
+    if let Some(r) = o.reason() {
         let _ = write!(page, "<p>in <b>{}</b>: {}</p>", esc(&o.phase), esc(r));
     }
     let _ = write!(page, "<table>");
-    for key in [
-        "target_block",
-        "targeted_block",
-        "targeted_face",
-        "indicated_point_m",
-        "plan_facets",
-        "plan_candidates",
-        "plan_width_mm",
-        "planner_ms",
-        "planning_frames",
-        "gripper_updates_while_planning",
-        "servo_steps",
-        "final_plane_error_mm",
-        "final_angle_error_deg",
-        "grasp_plane_error_mm",
-        "max_lift_mm",
-        "loop_us_p50",
-        "loop_us_p99",
-        "calibration_residual_px",
-        "sim_frames",
-        "wall_s",
-    ] {
-        let _ = write!(page, "<tr><th>{key}</th><td>{}</td></tr>", esc(&s[key].to_string()));
+    for (key, value) in page_rows(o.summary.as_ref()) {
+        let _ = write!(page, "<tr><th>{key}</th><td>{}</td></tr>", esc(&value));
     }
     let _ = write!(page, "</table><p>Files: <a href=\"run.json\">run.json</a> <a href=\"plan.json\">plan.json</a> <a href=\"daemon.json\">daemon.json</a> <a href=\"sim.json\">sim.json</a> <a href=\"daemon.stderr.log\">daemon log</a> <a href=\"sim.stderr.log\">sim log</a></p>");
     let caption = |name: &str| -> String {
@@ -504,50 +513,56 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn reasons_group_without_their_numbers() {
-        assert_eq!(reason_class("servo: not converged after 90 s (60 steps)"), "servo: not converged after # s (# steps)");
-        assert_eq!(reason_class("gripper tracker (left view) confidence 0.43 < 0.6"), "gripper tracker (left view) confidence # < #");
-        assert_eq!(reason_class("plan: no grasp site (3 facets; rejected: finger_collision 2)"), "plan: no grasp site (# facets; rejected: finger_collision #)");
-        // A hyphen inside a word stays; a minus sign goes with its number.
-        assert_eq!(reason_class("acquire_target: wrong-way -5 mm"), "acquire_target: wrong-way # mm");
-    }
-
-    fn outcome(seed: u64, success: bool, phase: &str, reason: Option<&str>, steps: Option<f64>) -> Outcome {
+    fn outcome(seed: u64, failure: Option<(&str, FailureKind, &str)>, steps: Option<f64>) -> Outcome {
         Outcome {
             job: Job { scenario: PathBuf::from("c.toml"), name: "c".into(), seed, out: None },
-            success,
-            phase: phase.into(),
-            reason: reason.map(String::from),
+            success: failure.is_none(),
+            phase: failure.map_or("done", |f| f.0).into(),
+            failure: failure.map(|(phase, kind, detail)| Failure::new(phase, kind, detail)),
             servo_steps: steps,
             wall_s: 40.0 + seed as f64,
-            summary: Value::Null,
+            summary: None,
         }
     }
 
     #[test]
-    fn the_summary_counts_failures_by_phase_and_reason() {
+    fn the_summary_counts_failures_by_phase_and_kind() {
+        let not_converged = |steps| format!("servo: not converged after 90 s ({steps} steps)");
+        let (c2, c4) = (not_converged(60), not_converged(61));
         let runs = [
-            outcome(1, true, "done", None, Some(3.0)),
-            outcome(2, false, "servo", Some("servo: not converged after 90 s (60 steps)"), Some(60.0)),
-            outcome(3, true, "done", None, Some(5.0)),
-            outcome(4, false, "servo", Some("servo: not converged after 90 s (61 steps)"), None),
-            outcome(5, false, "plan", Some("plan: no grasp site within 60 mm of the indicated point (the nearest is 75 mm away)"), None),
+            outcome(1, None, Some(3.0)),
+            outcome(2, Some(("servo", FailureKind::NotConverged, &c2)), Some(60.0)),
+            outcome(3, None, Some(5.0)),
+            outcome(4, Some(("servo", FailureKind::NotConverged, &c4)), None),
+            outcome(5, Some(("plan", FailureKind::NoGraspSite, "plan: no grasp site within 60 mm of the indicated point (the nearest is 75 mm away)")), None),
+            // Same phase, another kind: a group of its own, whatever the words.
+            outcome(6, Some(("servo", FailureKind::TrackerLost, "servo: not converged: the target tracker was lost")), None),
         ];
-        let r = summarise(&runs, 210.0);
-        assert_eq!(r["runs"], 5);
-        assert_eq!(r["successes"], 2);
-        assert_eq!(r["success_rate"], 0.4);
-        assert_eq!(r["failures"]["servo"]["servo: not converged after # s (# steps)"], 2);
-        assert_eq!(r["failures"]["plan"].as_object().unwrap().len(), 1);
+        let r = summarise(&runs, 210.0, None);
+        assert_eq!((r.all.runs, r.all.successes), (6, 2));
+        assert!((r.all.success_rate - 2.0 / 6.0).abs() < 1e-12);
+        assert_eq!(r.all.failures["servo"][&FailureKind::NotConverged], 2);
+        assert_eq!(r.all.failures["servo"][&FailureKind::TrackerLost], 1);
+        assert_eq!(r.all.failures["plan"].len(), 1);
+        // One group per (phase, kind), with each run's reason in full.
+        assert_eq!(r.all.failure_list.len(), 3);
+        let servo = r.all.failure_list.iter().find(|g| g.phase == "servo" && g.kind == FailureKind::NotConverged).unwrap();
+        assert_eq!(servo.count, 2);
+        assert_eq!(servo.runs, vec![GroupRun { run: "c#2".into(), reason: c2.clone() }, GroupRun { run: "c#4".into(), reason: c4.clone() }]);
         // Median servo steps over the runs that lifted only; wall times over all.
-        assert_eq!(r["median_servo_steps"], 4.0);
-        assert_eq!(r["median_run_wall_s"], 43.0);
-        assert_eq!(r["failed_runs"].as_array().unwrap().len(), 3);
-        assert_eq!(r["scenarios"]["c"]["runs"], 5);
+        assert_eq!(r.all.median_servo_steps, Some(4.0));
+        assert_eq!(r.all.median_run_wall_s, Some(43.5));
+        assert_eq!(r.all.wall_s, Some(210.0));
+        assert_eq!(r.failed_runs.len(), 4);
+        assert_eq!(r.failed_runs[0].reason, c2);
+        assert_eq!(r.scenarios["c"].runs, 6);
+        assert_eq!(r.scenarios["c"].wall_s, None);
+        assert_eq!(r.runs_detail.len(), 6);
         let t = table(&r);
-        assert!(t.contains("  2 x servo: servo: not converged after # s (# steps) (c#2, c#4)"), "{t}");
-        assert!(t.contains("40%"), "{t}");
+        assert!(t.contains("  2 x servo: not_converged (c#2, c#4)"), "{t}");
+        assert!(t.contains(&format!("c#4: {c4}")), "{t}");
+        assert!(t.contains("  1 x servo: tracker_lost (c#6)"), "{t}");
+        assert!(t.contains("33%"), "{t}");
     }
 
     #[test]
