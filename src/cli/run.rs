@@ -276,7 +276,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     if args.hint {
         daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
     } else {
-        daemon_args.extend(["--point".into(), format!("{},{},{}", point[0], point[1], point[2])]);
+        daemon_args.extend(["--point-m".into(), format!("{},{},{}", point[0], point[1], point[2])]);
     }
     let mut daemon = spawn("daemon", &daemon_args, dir)?;
     let mut note = None;
