@@ -9,6 +9,7 @@ use handeye_wire::stereo::{Delivery, PublishError, StereoGeometry, StereoPublish
 use handeye_wire::{monotonic_ns, WireNode};
 
 use super::domain::DomainArgs;
+use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
 Images are read in file-name order and sent as 8-bit gray (GRAY8): gray PNGs unchanged, colour
@@ -64,7 +65,7 @@ pub struct FeedArgs {
     /// Seconds to wait for a subscriber before the first frame (and, at --rate-hz 0, whenever
     /// none is left, or one stops taking frames) before giving up with an error. 0 = start at
     /// once without waiting.
-    #[arg(long, default_value_t = 30.0, value_name = "S")]
+    #[arg(long, default_value_t = 30.0, value_name = "S", value_parser = parse_seconds)]
     pub wait_subscriber_s: f64,
 
     #[command(flatten)]
@@ -171,9 +172,6 @@ pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayIm
 pub fn run(args: FeedArgs) -> Result<()> {
     if !(args.rate_hz >= 0.0 && args.rate_hz.is_finite()) {
         bail!("--rate-hz must be a number >= 0 (got {})", args.rate_hz);
-    }
-    if !(args.wait_subscriber_s >= 0.0 && args.wait_subscriber_s.is_finite()) {
-        bail!("--wait-subscriber-s must be a number of seconds >= 0 (got {})", args.wait_subscriber_s);
     }
     let seq = load_sequence(&args.dir, args.mono)?;
     let domain = &args.domain.domain;

@@ -10,6 +10,7 @@ use handeye_wire::{monotonic_ns, WireNode};
 use serde_json::json;
 
 use super::domain::DomainArgs;
+use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
 Progress lines and publisher events (\"publisher up at <ns> ns\", \"publisher gone at <ns> ns\")
@@ -52,7 +53,7 @@ pub struct MonitorArgs {
 
     /// Give up after this many seconds without a frame (0 = never). With --count, giving up
     /// before N frames is an error (exit code 1).
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    #[arg(long, default_value_t = 10.0, value_name = "S", value_parser = parse_seconds)]
     pub timeout_s: f64,
 
     /// Subscriber queue length, 1 or 2 frames. 1 = always the newest frame (a lagging
@@ -65,7 +66,7 @@ pub struct MonitorArgs {
     pub report: Option<std::path::PathBuf>,
 
     /// Seconds between progress lines on stderr (0 = none).
-    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    #[arg(long, default_value_t = 1.0, value_name = "S", value_parser = parse_seconds)]
     pub progress_s: f64,
 
     #[command(flatten)]
@@ -91,12 +92,6 @@ fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
 }
 
 pub fn run(args: MonitorArgs) -> Result<()> {
-    if !(args.timeout_s >= 0.0 && args.timeout_s.is_finite()) {
-        bail!("--timeout-s must be a number of seconds >= 0 (got {})", args.timeout_s);
-    }
-    if !(args.progress_s >= 0.0 && args.progress_s.is_finite()) {
-        bail!("--progress-s must be a number of seconds >= 0 (got {})", args.progress_s);
-    }
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-monitor")?;
     let mut sub = StereoSubscriber::create(&node, args.queue)?;
