@@ -113,9 +113,9 @@ fn an_occluder_hiding_the_target_stops_the_arm_within_three_frames() {
     assert_eq!(r.summary["success"], false, "{why}");
     assert_eq!(r.summary["final_phase"], "stopped", "{why}");
     assert!(r.summary["failure_reason"].as_str().unwrap().contains("target tracker"), "{why}");
-    let w = &r.sim["daemon"];
-    let hidden = w["target_hidden_frame"].as_u64().expect("the occluder hid the target");
-    let stop = w["first_stop_command_frame"].as_u64().expect("a Stop command");
+    let w = &r.sim.daemon;
+    let hidden = w.target_hidden_frame.expect("the occluder hid the target");
+    let stop = w.first_stop_command_frame.expect("a Stop command");
     assert!(stop <= hidden + 3, "hidden on frame {hidden}, Stop answered frame {stop}\n{why}");
     // It was the servo that was interrupted, not something earlier.
     assert_eq!(r.summary["phase_reached"], "servo", "{why}");
