@@ -16,8 +16,8 @@ use handeye_sim::report::SimReport;
 use handeye_wire::Domain;
 use handeye_wire::report::{Failure, FailureKind};
 
-use super::units::parse_seconds;
 use super::report::{as_json, read_report, RunSummary};
+use super::units::parse_seconds;
 
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
 /// as two child processes in a private domain, talking only over shared memory.
