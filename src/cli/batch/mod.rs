@@ -11,8 +11,8 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use handeye_wire::report::{Failure, FailureKind};
+use indicatif::{ProgressBar, ProgressStyle};
 
 use super::report::{BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, RunDetail, RunSummary};
 use super::units::parse_seconds;
