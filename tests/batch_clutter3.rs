@@ -1,6 +1,6 @@
 //! `handeye batch` as a user runs it, on two seeded random layouts of clutter3: the daemon
 //! plans its own grasp in each, and the batch reports the success rate, the failures by
-//! phase and reason, and a page per run. (The acceptance run, 30 seeds, is too slow for CI:
+//! phase and kind, and a page per run. (The acceptance run, 30 seeds, is too slow for CI:
 //! its numbers are in BENCHMARKS.md, "Closed loop".)
 
 mod e2e_support;
@@ -34,6 +34,8 @@ fn a_two_seed_batch_lifts_both_targets_and_writes_the_report() {
     assert_eq!(report["successes"], 2, "{why}");
     assert_eq!(report["success_rate"], 1.0, "{why}");
     assert_eq!(report["failures"], json!({}), "{why}");
+    assert_eq!(report["failure_list"], json!([]), "{why}");
+    assert_eq!(report["failed_runs"], json!([]), "{why}");
     assert!(report["median_servo_steps"].as_f64().is_some_and(|s| s >= 1.0), "{why}");
     // Each run planned its own grasp on the block nearest its indicated point, a different
     // block in each layout, tracking the gripper at the camera's rate while it planned.
@@ -43,6 +45,7 @@ fn a_two_seed_batch_lifts_both_targets_and_writes_the_report() {
     for d in detail {
         let s = &d["summary"];
         assert_eq!(s["target_source"], "plan", "{s}");
+        assert_eq!((&s["failure"], &s["failure_reason"]), (&Value::Null, &Value::Null), "{s}");
         assert_eq!(s["targeted_block"], s["target_block"], "{s}");
         assert!(s["plan_width_mm"].as_f64().is_some_and(|w| w <= 50.0), "the 50 mm width limit: {s}");
         for rate in s["gripper_update_rate_hz"].as_array().expect("rates") {

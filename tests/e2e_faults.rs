@@ -39,7 +39,7 @@ fn handeye(args: &[&str], dir: &Path, name: &str) -> Kid {
 fn start_pair(dir: &Path, domain: &Domain, sim_extra: &[&str]) -> (Kid, Kid) {
     let hint = dir.join("hint.json");
     let sc = scenario_without_antialias("pick_cube.toml", dir);
-    let mut args = vec!["sim", sc.to_str().unwrap(), "--lockstep", "--domain", domain.name(), "--wait-daemon-ms", "30000", "--hint-out", hint.to_str().unwrap()];
+    let mut args = vec!["sim", sc.to_str().unwrap(), "--lockstep", "--domain", domain.name(), "--wait-daemon-s", "30", "--hint-out", hint.to_str().unwrap()];
     args.extend_from_slice(sim_extra);
     let sim = handeye(&args, dir, "sim");
     let t0 = Instant::now();
@@ -113,9 +113,9 @@ fn an_occluder_hiding_the_target_stops_the_arm_within_three_frames() {
     assert_eq!(r.summary["success"], false, "{why}");
     assert_eq!(r.summary["final_phase"], "stopped", "{why}");
     assert!(r.summary["failure_reason"].as_str().unwrap().contains("target tracker"), "{why}");
-    let w = &r.sim["daemon"];
-    let hidden = w["target_hidden_frame"].as_u64().expect("the occluder hid the target");
-    let stop = w["first_stop_command_frame"].as_u64().expect("a Stop command");
+    let w = &r.sim.daemon;
+    let hidden = w.target_hidden_frame.expect("the occluder hid the target");
+    let stop = w.first_stop_command_frame.expect("a Stop command");
     assert!(stop <= hidden + 3, "hidden on frame {hidden}, Stop answered frame {stop}\n{why}");
     // It was the servo that was interrupted, not something earlier.
     assert_eq!(r.summary["phase_reached"], "servo", "{why}");
@@ -170,7 +170,7 @@ fn killing_the_daemon_lets_the_watchdog_stop_the_arm() {
     let _one = one_at_a_time();
     // A short reply time-out: with the daemon gone, lockstep frames do not wait long.
     let Setup { domain, _node, tel: _tel, cmds: _cmds, mut states, sim: _sim, mut daemon, dir: _dir } =
-        start_and_reach("killdaemon", &["--reply-timeout-ms", "100"], "calibration", |t| t.phase == Phase::Calibrate as u32);
+        start_and_reach("killdaemon", &["--reply-timeout-s", "0.1"], "calibration", |t| t.phase == Phase::Calibrate as u32);
     // Kill it while the arm is moving between cage points.
     let t0 = Instant::now();
     loop {

@@ -28,8 +28,8 @@ fn assert_picked(r: &RunResult, max_plane_mm: f64, max_angle_deg: f64) {
         assert!(files.iter().any(|f| f.ends_with(&format!("_{moment}.png"))), "no overlay at {moment}: {files:?}");
     }
     // Every frame the simulator published was answered by the daemon's command for it.
-    assert_eq!(r.sim["reply_timeouts"], 0, "{why}");
-    assert_eq!(r.sim["commands_rejected"], 0, "{why}");
+    assert_eq!(r.sim.reply_timeouts, 0, "{why}");
+    assert_eq!(r.sim.commands_rejected, 0, "{why}");
 }
 
 // Bounds: the issue's, <= 2 mm off the facet's plane and <= 1° from parallel at convergence,

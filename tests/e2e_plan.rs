@@ -63,24 +63,24 @@ fn clutter3_plans_its_own_grasp_and_lifts_the_block_nearest_the_indicated_point(
     assert_eq!(r.summary["target_source"], "plan", "{why}");
     // The simulator's target is the block nearest the indicated point; the daemon's target
     // trackers went onto one of its faces.
-    assert_eq!(r.sim["target"], "lblock", "{why}");
-    assert_eq!(r.sim["daemon"]["targeted"]["block"], "lblock", "{why}");
-    assert_eq!(r.sim["daemon"]["targeted"]["is_task_target"], true, "{why}");
+    assert_eq!(r.sim.target, "lblock", "{why}");
+    let targeted = r.sim.daemon.targeted.as_ref().expect("the simulator saw the target trackers");
+    assert_eq!(targeted.block, "lblock", "{why}");
+    assert!(targeted.is_task_target, "{why}");
     assert!(r.f("max_lift_mm") >= 50.0, "{why}");
     // Tracking while planning, as the simulator saw the telemetry (`planning` = 1 while
     // `tracker_updates` rises): one gripper update per frame the planner worked, so the
     // update rate over the planning window (simulated time) is the camera frame rate; a
     // tracker frozen while the planner works would show 0 (the bound is half the rate).
-    let w = &r.sim["daemon"]["plan"];
-    let frames = w["planning_frames"].as_u64().unwrap();
-    assert!(frames >= 3, "the planner outlasted only {frames} frames: too short a window to show a rate: {w}");
-    assert_eq!(w["max_update_step"], 1, "{w}");
-    assert_eq!(w["gripper_updates_while_planning"], serde_json::json!([frames - 1, frames - 1]), "{w}");
-    let fps = w["frame_rate_hz"].as_f64().unwrap();
-    let window_s = w["planning_window_s"].as_f64().unwrap();
-    assert!((window_s - (frames - 1) as f64 / fps).abs() < 1e-9, "{w}");
-    for rate in w["gripper_update_rate_hz"].as_array().unwrap() {
-        assert!(rate.as_f64().unwrap() >= 0.5 * fps, "gripper tracker updates at {rate} Hz while planning, camera at {fps} Hz: {w}");
+    let w = &r.sim.daemon.plan;
+    let frames = w.planning_frames;
+    assert!(frames >= 3, "the planner outlasted only {frames} frames: too short a window to show a rate: {w:?}");
+    assert_eq!(w.max_update_step, 1, "{w:?}");
+    assert_eq!(w.gripper_updates_while_planning, [frames - 1, frames - 1], "{w:?}");
+    let fps = w.frame_rate_hz;
+    assert!((w.planning_window_s - (frames - 1) as f64 / fps).abs() < 1e-9, "{w:?}");
+    for rate in w.gripper_update_rate_hz {
+        assert!(rate >= 0.5 * fps, "gripper tracker updates at {rate} Hz while planning, camera at {fps} Hz: {w:?}");
     }
     // The plan is in the report: facets, the chosen site, the images it was made on.
     let p = &r.daemon["plan"];

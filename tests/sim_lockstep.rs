@@ -9,7 +9,7 @@ use handeye_wire::domain::remove_domain_files;
 use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
 use handeye_wire::stereo::{StereoEvent, StereoSubscriber};
 use handeye_wire::{CommandKind, Domain, GripperCommand, RobotCommand, RobotState, WIRE_VERSION, WireNode, robot_flags};
-use serde_json::Value;
+use handeye_sim::referee::report::SimReport;
 
 const BIN: &str = env!("CARGO_BIN_EXE_handeye");
 
@@ -26,7 +26,7 @@ impl Drop for TestDomain {
     }
 }
 
-fn sim_json(args: &[&str], domain: &Domain) -> Value {
+fn sim_json(args: &[&str], domain: &Domain) -> SimReport {
     let out = Command::new(BIN)
         .arg("sim")
         .args(args)
@@ -43,16 +43,16 @@ fn cli_lockstep_runs_publish_identical_frames_for_100_frames() {
     let (d1, d2) = (TestDomain(Domain::unique("simdet")), TestDomain(Domain::unique("simdet")));
     let a = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "100"], &d1.0);
     let b = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "100"], &d2.0);
-    assert_eq!(a["frames"], 100);
-    assert!(a["fps"].as_f64().unwrap() > 0.0);
-    assert_eq!(a["reply_timeouts"], 0, "no daemon attached: no waiting");
-    let hash = a["frames_hash"].as_str().expect("frames_hash");
+    assert_eq!(a.frames, 100);
+    assert!(a.fps > 0.0);
+    assert_eq!(a.reply_timeouts, 0, "no daemon attached: no waiting");
+    let hash = &a.frames_hash;
     assert_eq!(hash.len(), 16);
-    assert_eq!(a["frames_hash"], b["frames_hash"], "two lockstep runs of one scenario and seed");
+    assert_eq!(a.frames_hash, b.frames_hash, "two lockstep runs of one scenario and seed");
     // A different scene gives a different hash (the hash covers the pixels).
     let d3 = TestDomain(Domain::unique("simdet"));
     let c = sim_json(&[&scenario("clutter3.toml"), "--lockstep", "--frames", "100"], &d3.0);
-    assert_ne!(c["frames_hash"], a["frames_hash"]);
+    assert_ne!(c.frames_hash, a.frames_hash);
 }
 
 fn command(seq: u64, frame_id: u64, kind: CommandKind, target: [f32; 3], gripper: GripperCommand) -> RobotCommand {
@@ -79,7 +79,7 @@ fn lockstep_waits_for_the_daemon_and_follows_its_commands() {
     let mut states = MessageSubscriber::<RobotState>::create(&node).expect("state subscriber");
 
     let child = Command::new(BIN)
-        .args(["sim", &scenario("pick_cube.toml"), "--lockstep", "--frames", "60", "--reply-timeout-ms", "5000", "--json"])
+        .args(["sim", &scenario("pick_cube.toml"), "--lockstep", "--frames", "60", "--reply-timeout-s", "5", "--json"])
         .args(["--domain", d.0.name()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -117,12 +117,12 @@ fn lockstep_waits_for_the_daemon_and_follows_its_commands() {
     }
     let out = child.wait_with_output().expect("sim output");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let report: Value = serde_json::from_slice(&out.stdout).expect("json");
+    let report: SimReport = serde_json::from_slice(&out.stdout).expect("the simulator's report");
 
     // Lockstep: every frame reached us, in order, none skipped, and every one was answered.
     assert_eq!(ids, (0..60).collect::<Vec<u64>>());
-    assert_eq!(report["reply_timeouts"], 0, "{report}");
-    assert!(report["commands"].as_u64().unwrap() >= 60);
+    assert_eq!(report.reply_timeouts, 0, "{report:?}");
+    assert!(report.commands >= 60);
     // The arm went where it was told (2 s of simulated time at 0.3 m/s) and closed its jaws.
     let s = last_state.expect("robot state received");
     assert_eq!(s.version, WIRE_VERSION);
@@ -141,9 +141,9 @@ fn lockstep_times_out_on_unanswered_frames_and_goes_on() {
     // A command publisher that never answers.
     let _commands = MessagePublisher::<RobotCommand>::create(&node).expect("command publisher");
     let start = Instant::now();
-    let report = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "5", "--reply-timeout-ms", "100"], &d.0);
-    assert_eq!(report["frames"], 5);
-    assert_eq!(report["reply_timeouts"], 5, "{report}");
+    let report = sim_json(&[&scenario("pick_cube.toml"), "--lockstep", "--frames", "5", "--reply-timeout-s", "0.1"], &d.0);
+    assert_eq!(report.frames, 5);
+    assert_eq!(report.reply_timeouts, 5, "{report:?}");
     assert!(start.elapsed() >= Duration::from_millis(500), "it waited for each frame");
 }
 

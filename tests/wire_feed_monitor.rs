@@ -14,11 +14,11 @@ fn cube_sequence_200_frames_lossless_with_matching_checksum() {
     let domain = TestDomain::new("feedmon");
     // The feed starts first and waits for its subscriber.
     let mut feed_cmd = handeye(&domain);
-    feed_cmd.args(["feed", "--mono", "--count", "200", "--rate", "0", "--dir"]).arg(&cube);
+    feed_cmd.args(["feed", "--mono", "--count", "200", "--rate-hz", "0", "--dir"]).arg(&cube);
     let mut feed = Proc::spawn("feed", feed_cmd);
     feed.wait_line("waiting up to", Duration::from_secs(20));
     let mut mon_cmd = handeye(&domain);
-    mon_cmd.args(["monitor", "--count", "200", "--json", "--checksum", "--timeout", "30", "--progress", "0"]);
+    mon_cmd.args(["monitor", "--count", "200", "--json", "--checksum", "--timeout-s", "30", "--progress-s", "0"]);
     let monitor = Proc::spawn("monitor", mon_cmd);
 
     let (mon_ok, out, mon_err) = monitor.finish(Duration::from_secs(120));
@@ -44,11 +44,11 @@ fn stereo_folders_arrive_left_then_right_with_the_monitor_started_first() {
     let rights = write_pngs(&tmp.0.join("right"), 12, 40, 30, 0xA5);
     // The monitor starts first and waits for frames.
     let mut mon_cmd = handeye(&domain);
-    mon_cmd.args(["monitor", "--count", "12", "--json", "--checksum", "--timeout", "30", "--progress", "0"]);
+    mon_cmd.args(["monitor", "--count", "12", "--json", "--checksum", "--timeout-s", "30", "--progress-s", "0"]);
     let mut monitor = Proc::spawn("monitor", mon_cmd);
     monitor.wait_line("listening", Duration::from_secs(20));
     let mut feed_cmd = handeye(&domain);
-    feed_cmd.args(["feed", "--rate", "0", "--dir"]).arg(&tmp.0);
+    feed_cmd.args(["feed", "--rate-hz", "0", "--dir"]).arg(&tmp.0);
     let feed = Proc::spawn("feed", feed_cmd);
 
     let (mon_ok, out, mon_err) = monitor.finish(Duration::from_secs(60));

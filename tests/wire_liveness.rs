@@ -21,11 +21,11 @@ fn killed_publisher_is_noticed_within_500_ms_and_a_restarted_one_is_picked_up() 
     write_pngs(&tmp.0, 8, 48, 32, 0);
     let feed = || {
         let mut c = handeye(&domain);
-        c.args(["feed", "--mono", "--loop", "--rate", "100", "--dir"]).arg(&tmp.0);
+        c.args(["feed", "--mono", "--loop", "--rate-hz", "100", "--dir"]).arg(&tmp.0);
         c
     };
     let mut mon_cmd = handeye(&domain);
-    mon_cmd.args(["monitor", "--json", "--timeout", "60", "--progress", "0"]);
+    mon_cmd.args(["monitor", "--json", "--timeout-s", "60", "--progress-s", "0"]);
     let mut monitor = Proc::spawn("monitor", mon_cmd);
     monitor.wait_line("listening", Duration::from_secs(20));
 

@@ -14,7 +14,7 @@ use wire_support::*;
 fn each_malformed_sample_is_rejected_with_its_reason_and_the_monitor_keeps_working() {
     let domain = TestDomain::new("malformed");
     let mut mon_cmd = handeye(&domain);
-    mon_cmd.args(["monitor", "--count", "3", "--json", "--checksum", "--timeout", "30", "--progress", "0"]);
+    mon_cmd.args(["monitor", "--count", "3", "--json", "--checksum", "--timeout-s", "30", "--progress-s", "0"]);
     let monitor = Proc::spawn("monitor", mon_cmd);
 
     let node = WireNode::create(&domain.0, "bad-camera").unwrap();

@@ -22,15 +22,15 @@ use super::domain::DomainArgs;
 /// Phases: acquire_gripper (open/close the jaws, locate the fingers, track the plate) →
 /// calibrate (visit the cage, fit the affine stereo model) → plan (one stereo pair to the
 /// planner on a worker thread, the gripper masked out and still tracked at frame rate:
-/// facets, grasp sites, the site nearest --point chosen; skipped with --hint) →
+/// facets, grasp sites, the site nearest --point-m chosen; skipped with --hint) →
 /// acquire_target (trackers on the chosen facet, or the hint's) → servo (coplanarity,
 /// look-and-move) → grasp → lift → done; or failed / stopped with a reason. Exit status 0
 /// when done, 2 when failed or stopped.
 ///
 /// Examples:
-///   handeye daemon --point 0.43,0.05 --out out/report
+///   handeye daemon --point-m 0.43,0.05 --out out/report
 ///   handeye daemon --hint out/hint.json --out out/report
-///   handeye daemon --domain lab --config daemon.toml --point 0.40,-0.02,0.06 --json
+///   handeye daemon --domain lab --config daemon.toml --point-m 0.40,-0.02,0.06 --json
 #[derive(Args)]
 pub struct DaemonArgs {
     /// Configuration (TOML): gripper model, calibration cage in robot coordinates, gains,
@@ -41,13 +41,13 @@ pub struct DaemonArgs {
     /// Operator hint (JSON): the target facet's corners in both views and its depth in mm
     /// (`handeye sim --hint-out` writes one). Read once at start-up. With a hint nothing is
     /// planned; without one the daemon plans its own grasp.
-    #[arg(long, value_name = "FILE", conflicts_with = "point")]
+    #[arg(long, value_name = "FILE", conflicts_with = "point_m")]
     hint: Option<PathBuf>,
     /// The operator's indicated point on the working plane, robot frame, metres: `X,Y` or
     /// `X,Y,Z` (Z defaults to 0). The plan executes the grasp site whose centre is nearest
     /// it in plan view; without it, the highest site.
     #[arg(long, value_name = "X,Y[,Z]", value_parser = parse_point)]
-    point: Option<[f64; 3]>,
+    point_m: Option<[f64; 3]>,
     /// Report folder: overlay PNGs of both views at key moments (trackers drawn), the plan
     /// (NN_plan.png: facets, grasp sites, the chosen one; plan.json), the servo error plot
     /// (servo_convergence.svg) and daemon.json (the outcome).
@@ -85,7 +85,7 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         domain: args.domain.domain.clone(),
         config,
         hint,
-        indicated_point_m: args.point,
+        indicated_point_m: args.point_m,
         report_dir: args.out.clone(),
     })?;
     let o = &result.outcome;

@@ -9,6 +9,7 @@ use handeye_wire::stereo::{Delivery, PublishError, StereoGeometry, StereoPublish
 use handeye_wire::{monotonic_ns, WireNode};
 
 use super::domain::DomainArgs;
+use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
 Images are read in file-name order and sent as 8-bit gray (GRAY8): gray PNGs unchanged, colour
@@ -22,9 +23,9 @@ Examples:
   # the cube sequence as both views, 30 frames/s, forever (stop with Ctrl-C)
   handeye feed --mono --dir ../shared/data/visp-cube --loop
   # 200 frames, as fast as the subscriber takes them, none lost
-  handeye feed --mono --dir ../shared/data/visp-cube --count 200 --rate 0
+  handeye feed --mono --dir ../shared/data/visp-cube --count 200 --rate-hz 0
   # a stereo pair sequence: DIR/left/*.png and DIR/right/*.png with matching names
-  handeye feed --dir recordings/run3 --rate 15";
+  handeye feed --dir recordings/run3 --rate-hz 15";
 
 /// Publish stereo frames from PNG files on `handeye/stereo`, like a camera would.
 ///
@@ -51,7 +52,7 @@ pub struct FeedArgs {
     /// Above 0 the feed behaves like a camera: it never waits, and a subscriber that lags
     /// loses its oldest queued frame.
     #[arg(long, default_value_t = 30.0, value_name = "HZ")]
-    pub rate: f64,
+    pub rate_hz: f64,
 
     /// Stop after N frames (0 = after the last file, or never with --loop).
     #[arg(long, default_value_t = 0, value_name = "N")]
@@ -61,11 +62,11 @@ pub struct FeedArgs {
     #[arg(long = "loop")]
     pub looping: bool,
 
-    /// Seconds to wait for a subscriber before the first frame (and, at --rate 0, whenever
+    /// Seconds to wait for a subscriber before the first frame (and, at --rate-hz 0, whenever
     /// none is left, or one stops taking frames) before giving up with an error. 0 = start at
     /// once without waiting.
-    #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
-    pub wait_subscriber: f64,
+    #[arg(long, default_value_t = 30.0, value_name = "S", value_parser = parse_seconds)]
+    pub wait_subscriber_s: f64,
 
     #[command(flatten)]
     pub domain: DomainArgs,
@@ -169,18 +170,15 @@ pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayIm
 }
 
 pub fn run(args: FeedArgs) -> Result<()> {
-    if !(args.rate >= 0.0 && args.rate.is_finite()) {
-        bail!("--rate must be a number >= 0 (got {})", args.rate);
-    }
-    if !(args.wait_subscriber >= 0.0 && args.wait_subscriber.is_finite()) {
-        bail!("--wait-subscriber must be a number of seconds >= 0 (got {})", args.wait_subscriber);
+    if !(args.rate_hz >= 0.0 && args.rate_hz.is_finite()) {
+        bail!("--rate-hz must be a number >= 0 (got {})", args.rate_hz);
     }
     let seq = load_sequence(&args.dir, args.mono)?;
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-feed")?;
     let geometry = StereoGeometry::gray8_pair(seq.width, seq.height);
-    let wait = Duration::from_secs_f64(args.wait_subscriber);
-    let lossless = args.rate == 0.0;
+    let wait = Duration::from_secs_f64(args.wait_subscriber_s);
+    let lossless = args.rate_hz == 0.0;
     let delivery = if lossless {
         // One frame in flight fits every subscriber queue, so nothing can overflow.
         let stall = if wait.is_zero() { Duration::from_secs(30) } else { wait };
@@ -195,13 +193,13 @@ pub fn run(args: FeedArgs) -> Result<()> {
         seq.width,
         seq.height,
         args.dir.display(),
-        if lossless { "as fast as the subscriber takes them (--rate 0)".to_owned() } else { format!("{} frames/s", args.rate) }
+        if lossless { "as fast as the subscriber takes them (--rate-hz 0)".to_owned() } else { format!("{} frames/s", args.rate_hz) }
     );
     if !wait.is_zero() && !wait_for_subscriber(&publisher, wait, domain)? {
         return Ok(()); // interrupted
     }
 
-    let period = (!lossless).then(|| Duration::from_secs_f64(1.0 / args.rate));
+    let period = (!lossless).then(|| Duration::from_secs_f64(1.0 / args.rate_hz));
     let start = Instant::now();
     let mut next_send = start;
     let mut next_progress = start + Duration::from_secs(1);
@@ -313,7 +311,7 @@ fn wait_for_subscriber(publisher: &StereoPublisher, wait: Duration, domain: &han
     );
     match publisher.wait_for_subscribers(1, wait) {
         Ok(true) => Ok(true),
-        Ok(false) => bail!("no subscriber on handeye/stereo in domain '{domain}' within {:.0} s (--wait-subscriber)", wait.as_secs_f64()),
+        Ok(false) => bail!("no subscriber on handeye/stereo in domain '{domain}' within {:.0} s (--wait-subscriber-s)", wait.as_secs_f64()),
         Err(PublishError::Interrupted) => Ok(false),
         Err(e) => Err(e.into()),
     }

@@ -10,17 +10,18 @@ use handeye_wire::{monotonic_ns, WireNode};
 use serde_json::json;
 
 use super::domain::DomainArgs;
+use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
 Progress lines and publisher events (\"publisher up at <ns> ns\", \"publisher gone at <ns> ns\")
 go to stderr as they happen; the summary goes to stdout at the end: after --count frames, after
---timeout without frames, or on Ctrl-C. Latency is the publisher's publish stamp to the moment
+--timeout-s without frames, or on Ctrl-C. Latency is the publisher's publish stamp to the moment
 this process holds the validated frame (CLOCK_MONOTONIC, same host).
 
 Examples:
   handeye monitor                                 # report once a second until Ctrl-C
   handeye monitor --count 200 --json --checksum   # 200 frames, then one JSON object
-  handeye monitor --timeout 0                     # wait for frames forever
+  handeye monitor --timeout-s 0                   # wait for frames forever
 
 JSON keys: frames, rejected (total), rejected_by_reason {version, pixel_format, zero_size,
 too_large, stride, payload_length, frame_id}, missed, fps, latency_ns_p50, latency_ns_p99,
@@ -33,12 +34,12 @@ without stride padding, left then right; see handeye_wire::checksum).";
 /// missed frame ids, frame rate and transport latency (publish stamp to receive, ns).
 ///
 /// Progress and publisher events ("publisher up", "publisher gone") go to stderr as they
-/// happen; the summary goes to stdout at the end: after --count frames, after --timeout
+/// happen; the summary goes to stdout at the end: after --count frames, after --timeout-s
 /// without frames, or on Ctrl-C.
 #[derive(Args, Debug)]
 #[command(after_help = EXAMPLES)]
 pub struct MonitorArgs {
-    /// Stop after N valid frames (0 = run until Ctrl-C or --timeout).
+    /// Stop after N valid frames (0 = run until Ctrl-C or --timeout-s).
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub count: u64,
 
@@ -52,8 +53,8 @@ pub struct MonitorArgs {
 
     /// Give up after this many seconds without a frame (0 = never). With --count, giving up
     /// before N frames is an error (exit code 1).
-    #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
-    pub timeout: f64,
+    #[arg(long, default_value_t = 10.0, value_name = "S", value_parser = parse_seconds)]
+    pub timeout_s: f64,
 
     /// Subscriber queue length, 1 or 2 frames. 1 = always the newest frame (a lagging
     /// monitor skips frames, counted as missed); 2 absorbs short stalls.
@@ -65,8 +66,8 @@ pub struct MonitorArgs {
     pub report: Option<std::path::PathBuf>,
 
     /// Seconds between progress lines on stderr (0 = none).
-    #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
-    pub progress: f64,
+    #[arg(long, default_value_t = 1.0, value_name = "S", value_parser = parse_seconds)]
+    pub progress_s: f64,
 
     #[command(flatten)]
     pub domain: DomainArgs,
@@ -91,19 +92,13 @@ fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
 }
 
 pub fn run(args: MonitorArgs) -> Result<()> {
-    if !(args.timeout >= 0.0 && args.timeout.is_finite()) {
-        bail!("--timeout must be a number of seconds >= 0 (got {})", args.timeout);
-    }
-    if !(args.progress >= 0.0 && args.progress.is_finite()) {
-        bail!("--progress must be a number of seconds >= 0 (got {})", args.progress);
-    }
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-monitor")?;
     let mut sub = StereoSubscriber::create(&node, args.queue)?;
     eprintln!("monitor: listening on handeye/stereo in domain '{domain}'");
 
-    let idle_limit = (args.timeout > 0.0).then(|| Duration::from_secs_f64(args.timeout));
-    let progress_every = (args.progress > 0.0).then(|| Duration::from_secs_f64(args.progress));
+    let idle_limit = (args.timeout_s > 0.0).then(|| Duration::from_secs_f64(args.timeout_s));
+    let progress_every = (args.progress_s > 0.0).then(|| Duration::from_secs_f64(args.progress_s));
     let start = Instant::now();
     let mut last_activity = start;
     let mut next_progress = progress_every.map(|p| start + p);
@@ -216,7 +211,7 @@ pub fn run(args: MonitorArgs) -> Result<()> {
     if timed_out && args.count > 0 && !completed {
         bail!(
             "no frame for {} s: got {} of {} frames (is a publisher running in domain '{domain}'?)",
-            args.timeout,
+            args.timeout_s,
             stats.received,
             args.count
         );

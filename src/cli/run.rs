@@ -8,10 +8,16 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use handeye_daemon::DaemonConfig;
+use handeye_daemon::phase::TargetSource;
+use handeye_daemon::{DaemonConfig, DaemonOutcome};
 use handeye_sim::Scenario;
+use handeye_sim::referee::judge::Verdict;
+use handeye_sim::referee::report::SimReport;
 use handeye_wire::Domain;
-use serde_json::{json, Value};
+use handeye_wire::report::{Failure, FailureKind};
+
+use super::report::{as_json, read_report, RunSummary};
+use super::units::parse_seconds;
 
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
 /// as two child processes in a private domain, talking only over shared memory.
@@ -35,7 +41,10 @@ use serde_json::{json, Value};
 /// never ground truth.
 ///
 /// Prints a summary, or with --json one object: success, phase_reached, final_phase,
-/// failure_reason, target_source (plan or hint), target_block, targeted_block,
+/// failure_reason (in words), failure (typed: phase, kind, detail; the daemon's own when it
+/// gave one, else interrupted (Ctrl-C or --timeout-s), wrong_target, timed_out (the
+/// scenario's time-out), process (a child reported nothing) or not_lifted, from what the
+/// simulator saw), target_source (plan or hint), target_block, targeted_block,
 /// targeted_face, indicated_point_m, plan_candidates, planner_ms, planning_frames,
 /// gripper_updates_while_planning, gripper_update_rate_hz (per second of simulated time
 /// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
@@ -86,7 +95,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Kill both children after this many seconds of wall time.
-    #[arg(long, default_value_t = 300.0, value_name = "S")]
+    #[arg(long, default_value_t = 300.0, value_name = "S", value_parser = parse_seconds)]
     timeout_s: f64,
 }
 
@@ -164,10 +173,6 @@ fn tail(path: &Path) -> String {
     lines[lines.len().saturating_sub(5)..].join("\n")
 }
 
-fn read_json(path: &Path) -> Option<Value> {
-    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
-}
-
 pub fn run(args: RunArgs) -> Result<()> {
     let scenario = Scenario::load(&args.scenario)?;
     let start = Instant::now();
@@ -186,19 +191,19 @@ pub fn run(args: RunArgs) -> Result<()> {
     if temp {
         let _ = std::fs::remove_dir_all(&dir);
     }
-    let (summary, ok) = result?;
+    let summary = result?;
     if args.json {
-        println!("{summary}");
+        println!("{}", serde_json::to_string(&summary)?);
     } else {
         print_summary(&summary);
     }
-    if !ok {
+    if !summary.success {
         std::process::exit(2);
     }
     Ok(())
 }
 
-fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Result<(Value, bool)> {
+fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Result<RunSummary> {
     let mut config = match &args.config {
         Some(p) => DaemonConfig::load(p)?,
         None => DaemonConfig::default(),
@@ -224,8 +229,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         s(&dir.join("hint.json")),
         "--verdict-out".into(),
         s(&dir.join("sim.json")),
-        "--wait-daemon-ms".into(),
-        "60000".into(),
+        "--wait-daemon-s".into(),
+        "60".into(),
         "--json".into(),
     ];
     if let Some(seed) = args.seed {
@@ -271,7 +276,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     if args.hint {
         daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
     } else {
-        daemon_args.extend(["--point".into(), format!("{},{},{}", point[0], point[1], point[2])]);
+        daemon_args.extend(["--point-m".into(), format!("{},{},{}", point[0], point[1], point[2])]);
     }
     let mut daemon = spawn("daemon", &daemon_args, dir)?;
     let mut note = None;
@@ -315,8 +320,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         // A private domain: nobody else uses its files.
         let _ = handeye_wire::domain::remove_domain_files(&domain);
     }
-    let d = read_json(&dir.join("daemon.json"));
-    let v = read_json(&dir.join("sim.json"));
+    let d: Option<DaemonOutcome> = read_if_written(&dir.join("daemon.json"))?;
+    let v: Option<SimReport> = read_if_written(&dir.join("sim.json"))?;
     if d.is_none() && v.is_none() {
         bail!(
             "neither child reported{}:\nsim: {}\ndaemon: {}",
@@ -325,111 +330,133 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
             tail(&dir.join("daemon.stderr.log"))
         );
     }
-    let d = d.unwrap_or(Value::Null);
-    let v = v.unwrap_or(Value::Null);
-    let success = v["success"].as_bool().unwrap_or(false);
-    let failure_reason = if success {
-        Value::Null
-    } else if let Some(r) = d["failure_reason"].as_str() {
-        json!(r)
-    } else if let Some(n) = &note {
-        json!(n)
-    } else if v["daemon"]["targeted"]["is_task_target"] == json!(false) {
-        json!(format!(
-            "the daemon went for block '{}', not the target '{}'",
-            v["daemon"]["targeted"]["block"].as_str().unwrap_or("?"),
-            v["target"].as_str().unwrap_or("?")
-        ))
-    } else if v["verdict"] == json!("timed_out") {
-        json!("the scenario timed out before the target was lifted and held")
-    } else if d.is_null() {
-        json!(format!("the daemon reported nothing: {}", tail(&dir.join("daemon.stderr.log"))))
-    } else {
-        json!("the target was not lifted and held (ground truth)")
+    let success = v.as_ref().is_some_and(|v| v.success);
+    let failure = if success { None } else { Some(failure(d.as_ref(), v.as_ref(), note, dir)) };
+    let watch = v.as_ref().map(|v| &v.daemon);
+    let targeted = watch.and_then(|w| w.targeted.as_ref());
+    let converged = watch.and_then(|w| w.converged.as_ref());
+    let grasped = watch.and_then(|w| w.grasped.as_ref());
+    let plan = d.as_ref().and_then(|d| d.plan.as_ref());
+    let planning = d.as_ref().and_then(|d| d.planning.as_ref());
+    let summary = RunSummary {
+        scenario: scenario.name.clone(),
+        success,
+        phase_reached: d.as_ref().map(|d| d.phase_reached.clone()),
+        final_phase: d.as_ref().map(|d| d.final_phase.clone()),
+        failure_reason: failure.as_ref().map(|f| f.detail.clone()),
+        failure,
+        target_source: d.as_ref().and_then(|d| d.target_source),
+        target_block: v.as_ref().map(|v| v.target.clone()),
+        targeted_block: targeted.map(|t| t.block.clone()),
+        targeted_face: targeted.map(|t| t.face.clone()),
+        indicated_point_m: point,
+        plan_facets: plan.map(|p| p.facets.len()),
+        plan_candidates: plan.map(|p| p.candidates.len()),
+        plan_width_mm: plan.and_then(|p| p.chosen.as_ref()).map(|c| c.width_mm),
+        planner_ms: planning.map(|p| p.planner_ms),
+        planning_frames: planning.map(|p| p.frames),
+        gripper_updates_while_planning: planning.map(|p| p.gripper_updates),
+        gripper_update_rate_hz: watch.map(|w| w.plan.gripper_update_rate_hz),
+        servo_steps: d.as_ref().map(|d| d.servo_steps),
+        final_plane_error_mm: converged.map(|c| c.final_plane_error_mm),
+        final_angle_error_deg: converged.map(|c| c.final_angle_error_deg),
+        grasp_plane_error_mm: grasped.map(|g| g.jaw_plane_offset_mm.abs()),
+        grasp_lateral_error_mm: grasped.map(|g| g.lateral_error_mm),
+        loop_us_p50: d.as_ref().map(|d| d.loop_us_p50),
+        loop_us_p99: d.as_ref().map(|d| d.loop_us_p99),
+        loop_us_max: d.as_ref().map(|d| d.loop_us_max),
+        deadline_misses: d.as_ref().map(|d| d.deadline_misses),
+        calibration_residual_px: d.as_ref().and_then(|d| d.calibration.as_ref()).map(|c| c.residual_rms_px),
+        max_lift_mm: v.as_ref().map(|v| v.max_lift_mm),
+        sim_frames: v.as_ref().map(|v| v.frames),
+        sim_time_s: v.as_ref().map(|v| v.sim_time_s),
+        wall_s,
+        seed: v.as_ref().map(|v| v.seed),
+        domain: domain.to_string(),
+        report: args.out.is_some().then(|| dir.display().to_string()),
     };
-    let conv = &v["daemon"]["converged"];
-    let grasped = &v["daemon"]["grasped"];
-    let summary = json!({
-        "scenario": scenario.name,
-        "success": success,
-        "phase_reached": d["phase_reached"],
-        "final_phase": d["final_phase"],
-        "failure_reason": failure_reason,
-        "target_source": d["target_source"],
-        "target_block": v["target"],
-        "targeted_block": v["daemon"]["targeted"]["block"],
-        "targeted_face": v["daemon"]["targeted"]["face"],
-        "indicated_point_m": point,
-        "plan_facets": d["plan"]["facets"].as_array().map(Vec::len),
-        "plan_candidates": d["plan"]["candidates"].as_array().map(Vec::len),
-        "plan_width_mm": d["plan"]["chosen"]["width_mm"],
-        "planner_ms": d["planning"]["planner_ms"],
-        "planning_frames": d["planning"]["frames"],
-        "gripper_updates_while_planning": d["planning"]["gripper_updates"],
-        "gripper_update_rate_hz": v["daemon"]["plan"]["gripper_update_rate_hz"],
-        "servo_steps": d["servo_steps"],
-        "final_plane_error_mm": conv["final_plane_error_mm"],
-        "final_angle_error_deg": conv["final_angle_error_deg"],
-        "grasp_plane_error_mm": grasped["jaw_plane_offset_mm"].as_f64().map(f64::abs),
-        "grasp_lateral_error_mm": grasped["lateral_error_mm"],
-        "loop_us_p50": d["loop_us_p50"],
-        "loop_us_p99": d["loop_us_p99"],
-        "loop_us_max": d["loop_us_max"],
-        "deadline_misses": d["deadline_misses"],
-        "calibration_residual_px": d["calibration"]["residual_rms_px"],
-        "max_lift_mm": v["max_lift_mm"],
-        "sim_frames": v["frames"],
-        "sim_time_s": v["sim_time_s"],
-        "wall_s": wall_s,
-        "seed": v["seed"],
-        "domain": domain.to_string(),
-        "report": if args.out.is_some() { json!(dir.display().to_string()) } else { Value::Null },
-    });
     std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
-    Ok((summary, success))
+    Ok(summary)
 }
 
-fn print_summary(s: &Value) {
-    let num = |k: &str, unit: &str| s[k].as_f64().map_or("n/a".to_string(), |x| format!("{x:.2}{unit}"));
+/// A child's report, `None` when it wrote none; one that is there but does not read is an
+/// error naming the file and the field.
+fn read_if_written<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>> {
+    if path.exists() { read_report(path).map(Some) } else { Ok(None) }
+}
+
+/// Why a run failed: the daemon's own failure when it gave one, else what the run itself saw
+/// (`note`: it was interrupted or ran out of wall time), else the simulator's judgement.
+/// The phase is the daemon's furthest one (`run` when it reported nothing).
+fn failure(d: Option<&DaemonOutcome>, v: Option<&SimReport>, note: Option<String>, dir: &Path) -> Failure {
+    let phase = d.map_or("run", |d| d.phase_reached.as_str());
+    if let Some(d) = d {
+        if let Some(f) = &d.failure {
+            return f.clone();
+        }
+        if let Some(r) = &d.failure_reason {
+            return Failure::new(phase, FailureKind::Internal, r.clone());
+        }
+    }
+    if let Some(n) = note {
+        return Failure::new(phase, FailureKind::Interrupted, n);
+    }
+    if let Some(v) = v
+        && let Some(t) = v.daemon.targeted.as_ref().filter(|t| !t.is_task_target)
+    {
+        return Failure::new(phase, FailureKind::WrongTarget, format!("the daemon went for block '{}', not the target '{}'", t.block, v.target));
+    }
+    if v.is_some_and(|v| v.verdict == Verdict::TimedOut) {
+        return Failure::new(phase, FailureKind::TimedOut, "the scenario timed out before the target was lifted and held");
+    }
+    if d.is_none() {
+        return Failure::new(phase, FailureKind::Process, format!("the daemon reported nothing: {}", tail(&dir.join("daemon.stderr.log"))));
+    }
+    Failure::new(phase, FailureKind::NotLifted, "the target was not lifted and held (ground truth)")
+}
+
+fn print_summary(s: &RunSummary) {
+    let num = |x: Option<f64>, unit: &str| x.map_or("n/a".to_string(), |x| format!("{x:.2}{unit}"));
+    let name = |x: &Option<String>| x.clone().unwrap_or_else(|| "?".to_string());
     println!(
         "{}: {} (phase reached: {}){}",
-        s["scenario"].as_str().unwrap_or("?"),
-        if s["success"].as_bool() == Some(true) { "SUCCESS" } else { "FAILED" },
-        s["phase_reached"].as_str().unwrap_or("?"),
-        s["failure_reason"].as_str().map(|r| format!(": {r}")).unwrap_or_default()
+        s.scenario,
+        if s.success { "SUCCESS" } else { "FAILED" },
+        name(&s.phase_reached),
+        s.failure_reason.as_ref().map(|r| format!(": {r}")).unwrap_or_default()
     );
-    if s["target_source"] == "plan" {
+    if s.target_source == Some(TargetSource::Plan) {
         println!(
             "  plan: {} facets, {} grasp candidates, chosen {} mm wide on block '{}' (face {}; the target is '{}'); planner {}, {} frames answered meanwhile, gripper tracked {} times ({} Hz)",
-            s["plan_facets"],
-            s["plan_candidates"],
-            num("plan_width_mm", ""),
-            s["targeted_block"].as_str().unwrap_or("?"),
-            s["targeted_face"].as_str().unwrap_or("?"),
-            s["target_block"].as_str().unwrap_or("?"),
-            num("planner_ms", " ms"),
-            s["planning_frames"],
-            s["gripper_updates_while_planning"],
-            s["gripper_update_rate_hz"]
+            as_json(&s.plan_facets),
+            as_json(&s.plan_candidates),
+            num(s.plan_width_mm, ""),
+            name(&s.targeted_block),
+            name(&s.targeted_face),
+            name(&s.target_block),
+            num(s.planner_ms, " ms"),
+            as_json(&s.planning_frames),
+            as_json(&s.gripper_updates_while_planning),
+            as_json(&s.gripper_update_rate_hz)
         );
     }
     println!(
         "  servo: {} steps; at convergence plate {} off the facet plane, {} off parallel; jaws {} off the block's mid-plane",
-        s["servo_steps"],
-        num("final_plane_error_mm", " mm"),
-        num("final_angle_error_deg", "°"),
-        num("grasp_plane_error_mm", " mm")
+        as_json(&s.servo_steps),
+        num(s.final_plane_error_mm, " mm"),
+        num(s.final_angle_error_deg, "°"),
+        num(s.grasp_plane_error_mm, " mm")
     );
     println!(
         "  loop: p50 {}, p99 {}, {} deadline misses; calibration residual {}; {} frames, {}",
-        num("loop_us_p50", " µs"),
-        num("loop_us_p99", " µs"),
-        s["deadline_misses"],
-        num("calibration_residual_px", " px"),
-        s["sim_frames"],
-        num("wall_s", " s wall")
+        num(s.loop_us_p50, " µs"),
+        num(s.loop_us_p99, " µs"),
+        as_json(&s.deadline_misses),
+        num(s.calibration_residual_px, " px"),
+        as_json(&s.sim_frames),
+        num(Some(s.wall_s), " s wall")
     );
-    if let Some(r) = s["report"].as_str() {
+    if let Some(r) = &s.report {
         println!("  report: {r}");
     }
 }

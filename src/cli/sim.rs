@@ -6,12 +6,14 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::Args;
 use handeye_sim::referee::judge::Verdict;
+use handeye_sim::referee::report::{LaidOutBlock, SimDriver, SimMode, SimReport};
 use handeye_sim::run::{Driver, RunOptions, Runner, run_lockstep, run_realtime};
 use handeye_sim::referee::script::GroundTruthPick;
 use handeye_sim::transport::WireTransport;
 use handeye_sim::{Scenario, Simulator};
 
 use super::domain::DomainArgs;
+use super::units::parse_seconds;
 
 /// Run the simulator: physics, the robot's controller and stereo rendering.
 ///
@@ -22,7 +24,7 @@ use super::domain::DomainArgs;
 ///
 /// Modes:
 ///   --lockstep   publish frame N, wait for the daemon's command stamped N (or
-///                --reply-timeout-ms), then step physics one frame period; with no daemon
+///                --reply-timeout-s), then step physics one frame period; with no daemon
 ///                attached it steps straight on. Bit-identical frames for a seed.
 ///   (default)    real time: frames at the scenario's camera rate, stamped with their
 ///                capture time; commands act at the next physics step.
@@ -43,9 +45,9 @@ pub struct SimArgs {
     /// Without --frames, keep running after success until the scenario's time-out.
     #[arg(long)]
     no_stop_on_success: bool,
-    /// Lockstep: longest wait for the daemon's command for a frame, milliseconds.
-    #[arg(long, default_value_t = 1000)]
-    reply_timeout_ms: u64,
+    /// Lockstep: longest wait for the daemon's command for a frame, seconds.
+    #[arg(long, default_value_t = 1.0, value_name = "S", value_parser = parse_seconds)]
+    reply_timeout_s: f64,
     /// Drive the arm with a scripted pick that reads the target's pose from ground truth
     /// (open, approach, descend, close, lift 70 mm, hold). A physics demo, not vision: it
     /// shows the arm and gripper can pick the block; the daemon has to find it with cameras.
@@ -76,10 +78,10 @@ pub struct SimArgs {
     /// before the first frame, for `handeye daemon --hint`.
     #[arg(long, value_name = "FILE")]
     hint_out: Option<PathBuf>,
-    /// Lockstep: before the first frame, wait up to this many milliseconds for a daemon
-    /// (a command publisher) to attach. 0 = do not wait.
-    #[arg(long, default_value_t = 0, value_name = "MS")]
-    wait_daemon_ms: u64,
+    /// Lockstep: before the first frame, wait up to this many seconds for a daemon (a
+    /// command publisher) to attach. 0 = do not wait.
+    #[arg(long, default_value_t = 0.0, value_name = "S", value_parser = parse_seconds)]
+    wait_daemon_s: f64,
     /// Also write the JSON object of --json to this file (the verdict `handeye run` merges).
     #[arg(long, value_name = "FILE")]
     verdict_out: Option<PathBuf>,
@@ -127,7 +129,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     }
     let options = RunOptions {
         frames: args.frames,
-        reply_timeout: Duration::from_millis(args.reply_timeout_ms),
+        reply_timeout: Duration::from_secs_f64(args.reply_timeout_s),
         stop_on_success: !args.no_stop_on_success,
     };
     if let Some(path) = &args.hint_out {
@@ -145,8 +147,8 @@ pub fn run(args: SimArgs) -> Result<()> {
     }
     let (w, h) = (runner.renderer.width(), runner.renderer.height());
     let mut transport = WireTransport::new(&args.domain.domain, w, h)?;
-    if args.lockstep && args.wait_daemon_ms > 0 && !transport.wait_for_daemon(Duration::from_millis(args.wait_daemon_ms))? {
-        anyhow::bail!("no daemon attached to domain '{}' within {} ms", transport.domain(), args.wait_daemon_ms);
+    if args.lockstep && args.wait_daemon_s > 0.0 && !transport.wait_for_daemon(Duration::from_secs_f64(args.wait_daemon_s))? {
+        anyhow::bail!("no daemon attached to domain '{}' within {} s", transport.domain(), args.wait_daemon_s);
     }
     if !args.json {
         eprintln!(
@@ -173,39 +175,44 @@ pub fn run(args: SimArgs) -> Result<()> {
         Verdict::Success { at_ns } => format!("success at {:.2} s", at_ns as f64 * 1e-9),
         Verdict::TimedOut => "timed out".to_string(),
     };
-    let report = args.json || args.verdict_out.is_some();
-    if report {
-        let out = serde_json::json!({
-            "scenario": name,
-            "mode": if args.lockstep { "lockstep" } else { "realtime" },
-            "frames": stats.frames,
-            "fps": stats.fps,
-            "wall_s": stats.wall_s,
-            "sim_time_s": runner.sim.now_ns() as f64 * 1e-9,
-            "frames_hash": format!("{:016x}", stats.frames_hash),
-            "commands": stats.commands,
-            "reply_timeouts": stats.reply_timeouts,
-            "late_frames": stats.late_frames,
-            "verdict": verdict,
-            "driver": if args.scripted_pick { "scripted pick from ground truth (physics demo)" } else { "commands from handeye/robot/command" },
-            "max_lift_mm": runner.sim.judge().max_lift_m * 1e3,
-            "adapter": adapter,
-            "domain": transport.domain().to_string(),
-            "commands_rejected": transport.command_stats().rejected_total(),
-            "success": matches!(verdict, Verdict::Success { .. }),
-            "seed": runner.sim.scenario.seed,
-            "target": runner.sim.scenario.blocks[runner.sim.target_index()].name,
-            "indicated_point_m": runner.sim.scenario.indicated_point_m(),
-            "layout": runner.sim.scenario.blocks.iter().map(|b| serde_json::json!({
-                "name": b.name, "kind": b.kind, "size_mm": b.size_mm, "position_m": b.position_m, "yaw_deg": b.yaw_deg,
-            })).collect::<Vec<_>>(),
-            "daemon": &runner.watch,
-        });
+    if args.json || args.verdict_out.is_some() {
+        let scenario = &runner.sim.scenario;
+        let report = SimReport {
+            scenario: name.clone(),
+            mode: if args.lockstep { SimMode::Lockstep } else { SimMode::Realtime },
+            frames: stats.frames,
+            fps: stats.fps,
+            wall_s: stats.wall_s,
+            sim_time_s: runner.sim.now_ns() as f64 * 1e-9,
+            frames_hash: format!("{:016x}", stats.frames_hash),
+            commands: stats.commands,
+            reply_timeouts: stats.reply_timeouts,
+            late_frames: stats.late_frames,
+            verdict,
+            driver: if args.scripted_pick { SimDriver::ScriptedPick } else { SimDriver::Commands },
+            max_lift_mm: runner.sim.judge().max_lift_m * 1e3,
+            adapter,
+            domain: transport.domain().to_string(),
+            commands_rejected: transport.command_stats().rejected_total(),
+            success: matches!(verdict, Verdict::Success { .. }),
+            seed: scenario.seed,
+            target: scenario.blocks[runner.sim.target_index()].name.clone(),
+            indicated_point_m: scenario.indicated_point_m(),
+            layout: scenario
+                .blocks
+                .iter()
+                .map(|b| LaidOutBlock { name: b.name.clone(), kind: b.kind, size_mm: b.size_mm, position_m: b.position_m, yaw_deg: b.yaw_deg })
+                .collect(),
+            daemon: runner.watch.clone(),
+        };
         if let Some(path) = &args.verdict_out {
-            std::fs::write(path, serde_json::to_string_pretty(&out)?).with_context(|| format!("writing {}", path.display()))?;
+            // Write then rename, so that `handeye run` never reads half a report.
+            let tmp = path.with_extension("json.tmp");
+            std::fs::write(&tmp, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", tmp.display()))?;
+            std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
         }
         if args.json {
-            println!("{out}");
+            println!("{}", serde_json::to_string(&report)?);
         }
     }
     if !args.json {

@@ -62,7 +62,7 @@ pub struct TrackArgs {
 
     /// Half-length of the normal search, pixels (1..=40).
     #[arg(long, value_name = "PX", default_value_t = 10.0)]
-    search: f64,
+    search_px: f64,
 
     /// One-sided search: each point accepts only edges of the sign it locked on to in the
     /// first frames (or of `--polarity` if given). Rejects clutter of the other sign, but a
@@ -75,9 +75,9 @@ pub struct TrackArgs {
     polarity: Option<PolarityArg>,
 
     /// Frame rate of the sequence, frames per second: the predictive filter scales its
-    /// velocity by the real time between frames, 1/fps here.
+    /// velocity by the real time between frames, 1/frame-rate-hz here.
     #[arg(long, value_name = "HZ", default_value_t = 30.0)]
-    fps: f64,
+    frame_rate_hz: f64,
 
     /// Sampling points around the polygon.
     #[arg(long, value_name = "N", default_value_t = 100)]
@@ -107,12 +107,12 @@ enum ModelArg {
 }
 
 pub fn run(args: TrackArgs) -> Result<()> {
-    if !(args.fps > 0.0 && args.fps.is_finite()) {
-        bail!("--fps must be a positive number of frames per second, got {}", args.fps);
+    if !(args.frame_rate_hz > 0.0 && args.frame_rate_hz.is_finite()) {
+        bail!("--frame-rate-hz must be a positive number of frames per second, got {}", args.frame_rate_hz);
     }
     let config = TrackerConfig {
         points: args.points,
-        search_px: args.search,
+        search_px: args.search_px,
         edge_sign: match (args.one_sided, args.polarity) {
             (false, _) => EdgeSign::Either,
             (true, None) => EdgeSign::Learned,
@@ -143,7 +143,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let mut tracker = ContourTracker::new(config, &corners)
         .with_context(|| format!("{}: face \"{}\" is not a usable polygon", args.init.display(), args.face))?;
 
-    let dt_s = 1.0 / args.fps;
+    let dt_s = 1.0 / args.frame_rate_hz;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut update_us = Vec::with_capacity(frames.len());

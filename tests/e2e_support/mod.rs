@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, MutexGuard};
 
+use handeye_sim::referee::report::SimReport;
 use serde_json::Value;
 
 pub fn scenario(name: &str) -> PathBuf {
@@ -47,11 +48,11 @@ impl Drop for TempDir {
     }
 }
 
-/// `handeye run SCENARIO --json --out DIR [extra]`: the summary, the sim's and daemon's
-/// JSONs, and the exit status.
+/// `handeye run SCENARIO --json --out DIR [extra]`: the summary, the sim's report (typed: a
+/// missing or renamed field fails here, naming it), the daemon's JSON, and the exit status.
 pub struct RunResult {
     pub summary: Value,
-    pub sim: Value,
+    pub sim: SimReport,
     pub daemon: Value,
     pub status: i32,
     pub out: TempDir,
@@ -78,7 +79,12 @@ pub fn run(scenario_file: &str, extra: &[&str]) -> RunResult {
     let read = |name: &str| -> Value {
         std::fs::read_to_string(out.0.join(name)).ok().and_then(|t| serde_json::from_str(&t).ok()).unwrap_or(Value::Null)
     };
-    let (sim, daemon) = (read("sim.json"), read("daemon.json"));
+    let sim_path = out.0.join("sim.json");
+    let sim = std::fs::read_to_string(&sim_path)
+        .map_err(|e| e.to_string())
+        .and_then(|t| serde_json::from_str(&t).map_err(|e| e.to_string()))
+        .unwrap_or_else(|e| panic!("{}: {e}\nstdout: {stdout}\nstderr: {}", sim_path.display(), String::from_utf8_lossy(&o.stderr)));
+    let daemon = read("daemon.json");
     RunResult { summary, sim, daemon, status: o.status.code().unwrap_or(-1), out }
 }
 
@@ -93,7 +99,7 @@ impl RunResult {
         format!(
             "summary: {}\nsim saw: {}\nsim stderr: {}\ndaemon stderr: {}",
             self.summary,
-            self.sim["daemon"],
+            serde_json::to_string(&self.sim.daemon).unwrap_or_default(),
             tail("sim.stderr.log"),
             tail("daemon.stderr.log")
         )

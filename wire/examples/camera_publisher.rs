@@ -2,11 +2,11 @@
 //! `handeye/stereo`, exactly as a real driver would publish its images.
 //!
 //! ```text
-//! cargo run -p handeye-wire --example camera_publisher -- --frames 300 --rate 30
+//! cargo run -p handeye-wire --example camera_publisher -- --frames 300 --rate-hz 30
 //! handeye monitor            # in another terminal: frames, rate, latency
 //! ```
 //!
-//! Flags: `--frames N` (0 = until Ctrl-C, the default), `--rate HZ` (default 30),
+//! Flags: `--frames N` (0 = until Ctrl-C, the default), `--rate-hz HZ` (default 30),
 //! `--size WxH` (default 640x480), `--lossless` (wait for the subscriber instead of running
 //! at a fixed rate). The domain comes from `HANDEYE_DOMAIN` (default `handeye`).
 //!
@@ -38,7 +38,7 @@ fn parse_args() -> Result<Options, String> {
         let mut value = || args.next().ok_or(format!("{flag} needs a value"));
         match flag.as_str() {
             "--frames" => o.frames = value()?.parse().map_err(|e| format!("--frames: {e}"))?,
-            "--rate" => o.rate_hz = value()?.parse().map_err(|e| format!("--rate: {e}"))?,
+            "--rate-hz" => o.rate_hz = value()?.parse().map_err(|e| format!("--rate-hz: {e}"))?,
             "--size" => {
                 let v = value()?;
                 let (w, h) = v.split_once('x').ok_or(format!("--size wants WxH, got {v}"))?;
@@ -50,7 +50,7 @@ fn parse_args() -> Result<Options, String> {
         }
     }
     if !(o.rate_hz > 0.0 && o.rate_hz.is_finite()) {
-        return Err("--rate must be > 0".into());
+        return Err("--rate-hz must be > 0".into());
     }
     Ok(o)
 }

@@ -115,6 +115,17 @@ impl std::fmt::Display for Failure {
 
 impl std::error::Error for Failure {}
 
+/// `#[serde(deserialize_with = "handeye_wire::report::required")]` on an `Option` field of a
+/// report: the key must be there (`null` for `None`). Serde otherwise reads a missing
+/// `Option` as `None`, so a renamed field would read as "no value" without a word.
+pub fn required<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    Option::<T>::deserialize(d)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

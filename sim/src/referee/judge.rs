@@ -1,12 +1,12 @@
 //! The success rule, judged from ground truth: the target block lifted at least `lift_mm`
 //! above where it rested, and kept there for `hold_s` seconds without a break.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::scenario::SuccessRule;
 
 /// How the run stands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// Not (yet) lifted long enough.

@@ -3,7 +3,8 @@
 //! ([`judge`]), the operator hint an operator would give the daemon ([`hint`]: the *generator*;
 //! the hint's format is the wire contract's `handeye_wire::hint`), what the daemon claims,
 //! judged from ground truth ([`watch`]), and a scripted pick that reads ground truth to check
-//! that the arm can pick a block at all ([`script`]).
+//! that the arm can pick a block at all ([`script`]), and the run's verdict as `sim.json`
+//! reports it ([`report`]).
 //!
 //! Depends on the simulator (which it reads) and on the renderer's camera model and face ids;
 //! the simulator depends only on [`judge`] (it judges success every step). Inside: `watch` →
@@ -11,6 +12,7 @@
 
 pub mod hint;
 pub mod judge;
+pub mod report;
 pub mod script;
 pub mod truth;
 pub mod watch;

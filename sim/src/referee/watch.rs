@@ -33,14 +33,15 @@
 
 use glam::DVec3;
 use handeye_wire::{CommandKind, Phase, RobotCommand, Telemetry};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::referee::hint::HintFacet;
 use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
 use crate::simulator::Simulator;
 
 /// The gripper's placement when the servo converged, from ground truth.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ConvergedPlacement {
     pub frame: u64,
     pub final_plane_error_mm: f64,
@@ -56,7 +57,8 @@ pub struct ConvergedPlacement {
 }
 
 /// The facet the daemon's target trackers were (last) put on, from ground truth.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TargetedFacet {
     pub frame: u64,
     pub block: String,
@@ -69,7 +71,8 @@ pub struct TargetedFacet {
 }
 
 /// The daemon's telemetry during its plan phase.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlanWatch {
     /// Telemetry samples with phase `plan`.
     pub frames: u64,
@@ -96,24 +99,34 @@ pub struct PlanWatch {
     last: Option<[u64; 2]>,
 }
 
-/// What the simulator saw of the daemon (serialised into the sim's verdict).
-#[derive(Debug, Clone, Default, Serialize)]
+/// What the simulator saw of the daemon (the `daemon` part of [`super::report::SimReport`];
+/// read back by `handeye run`, which gets only the serialised fields: the judging state is
+/// skipped).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DaemonWatch {
     /// First frame on which each phase was reported, by name, in order of appearance.
     pub phases: Vec<(String, u64)>,
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub converged: Option<ConvergedPlacement>,
     /// The placement when the jaws started closing.
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub grasped: Option<ConvergedPlacement>,
     /// First frame with phase `stopped` or `failed`, and the reason the daemon gave.
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub stopped_frame: Option<u64>,
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub stop_reason: Option<String>,
     /// First frame answered by a `Stop` command.
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub first_stop_command_frame: Option<u64>,
     /// First frame on which the target facet was hidden (occluder scenarios only).
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub target_hidden_frame: Option<u64>,
     /// Telemetry samples read.
     pub telemetry: u64,
     /// The facet the target trackers were put on.
+    #[serde(deserialize_with = "handeye_wire::report::required")]
     pub targeted: Option<TargetedFacet>,
     pub plan: PlanWatch,
     #[serde(skip)]
@@ -318,3 +331,4 @@ pub fn identify_facet(sim: &Simulator, left: &[[f64; 2]], right: &[[f64; 2]]) ->
     }
     best
 }
+

@@ -16,7 +16,7 @@ use serde_json::json;
 /// subscriber holds the validated sample, woken by the event service.
 ///
 /// The publisher is this binary started again as a separate process, in a private domain.
-/// It paces samples at --rate and waits for the subscriber to release each one, so no sample
+/// It paces samples at --rate-hz and waits for the subscriber to release each one, so no sample
 /// is lost and none queues behind another. Build with --release for numbers worth recording.
 #[derive(Args, Debug)]
 #[command(after_help = "Example:\n  cargo build --release && target/release/handeye bench transport --samples 5000 --json")]
@@ -31,15 +31,15 @@ pub struct TransportArgs {
 
     /// Samples per second sent by the publisher (0 = back to back).
     #[arg(long, default_value_t = 500.0, value_name = "HZ")]
-    pub rate: f64,
+    pub rate_hz: f64,
 
     /// Image width, pixels.
     #[arg(long, default_value_t = 640)]
-    pub width: u32,
+    pub width_px: u32,
 
     /// Image height, pixels.
     #[arg(long, default_value_t = 480)]
-    pub height: u32,
+    pub height_px: u32,
 
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -51,8 +51,8 @@ pub struct TransportArgs {
 }
 
 pub fn run(args: TransportArgs) -> Result<()> {
-    if !(args.rate >= 0.0 && args.rate.is_finite()) {
-        bail!("--rate must be >= 0 (got {})", args.rate);
+    if !(args.rate_hz >= 0.0 && args.rate_hz.is_finite()) {
+        bail!("--rate-hz must be >= 0 (got {})", args.rate_hz);
     }
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -65,7 +65,7 @@ pub fn run(args: TransportArgs) -> Result<()> {
 
 fn publisher(args: &TransportArgs, domain: &Domain) -> Result<()> {
     let node = WireNode::create(domain, "bench-publisher")?;
-    let geometry = StereoGeometry::gray8_pair(args.width, args.height);
+    let geometry = StereoGeometry::gray8_pair(args.width_px, args.height_px);
     let options = StereoPublisherOptions {
         delivery: Delivery::Lossless { in_flight: 1, timeout: Duration::from_secs(30) },
         ..Default::default()
@@ -74,7 +74,7 @@ fn publisher(args: &TransportArgs, domain: &Domain) -> Result<()> {
     if !p.wait_for_subscribers(1, Duration::from_secs(30))? {
         bail!("bench peer: no subscriber within 30 s");
     }
-    let period = (args.rate > 0.0).then(|| Duration::from_secs_f64(1.0 / args.rate));
+    let period = (args.rate_hz > 0.0).then(|| Duration::from_secs_f64(1.0 / args.rate_hz));
     let mut next = Instant::now();
     for k in 0..args.warmup + args.samples {
         if let Some(period) = period {
@@ -105,7 +105,7 @@ fn measure(args: &TransportArgs, domain: &Domain) -> Result<()> {
     let mut peer = Command::new(exe)
         .args(["bench", "transport", "--peer-publisher", domain.name()])
         .args(["--samples", &args.samples.to_string(), "--warmup", &args.warmup.to_string()])
-        .args(["--rate", &args.rate.to_string(), "--width", &args.width.to_string(), "--height", &args.height.to_string()])
+        .args(["--rate-hz", &args.rate_hz.to_string(), "--width-px", &args.width_px.to_string(), "--height-px", &args.height_px.to_string()])
         .stdin(Stdio::null())
         .spawn()
         .context("cannot start the publisher process")?;
@@ -153,16 +153,16 @@ fn measure(args: &TransportArgs, domain: &Domain) -> Result<()> {
     latencies.sort_unstable();
     let pct = |p: f64| latencies[(((p / 100.0) * latencies.len() as f64).ceil() as usize).clamp(1, latencies.len()) - 1];
     let mean = latencies.iter().sum::<u64>() as f64 / latencies.len() as f64;
-    let payload = args.width as u64 * args.height as u64 * 2;
+    let payload = args.width_px as u64 * args.height_px as u64 * 2;
     if args.json {
         println!(
             "{}",
             json!({
                 "samples": latencies.len(),
                 "warmup": args.warmup,
-                "rate_hz": args.rate,
-                "width": args.width,
-                "height": args.height,
+                "rate_hz": args.rate_hz,
+                "width": args.width_px,
+                "height": args.height_px,
                 "cameras": 2,
                 "payload_bytes": payload,
                 "missed": stats.missed,
@@ -178,10 +178,10 @@ fn measure(args: &TransportArgs, domain: &Domain) -> Result<()> {
         println!(
             "transport: {} samples of 2 x {}x{} GRAY8 ({} bytes), publisher process -> subscriber process, {}",
             latencies.len(),
-            args.width,
-            args.height,
+            args.width_px,
+            args.height_px,
             payload,
-            if args.rate > 0.0 { format!("{} samples/s", args.rate) } else { "back to back".to_owned() }
+            if args.rate_hz > 0.0 { format!("{} samples/s", args.rate_hz) } else { "back to back".to_owned() }
         );
         println!(
             "latency (publish stamp -> received): p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us, mean {:.1} us",

@@ -26,7 +26,7 @@ pub enum Delivery {
     /// Never lose a frame: at most `in_flight` frames (1..) may be sent and not yet released
     /// by every subscriber; `publish` waits (up to `timeout`) for a slot. With `in_flight` no
     /// larger than the smallest subscriber queue (1 is always safe), nothing can overflow.
-    /// This is `handeye feed --rate 0`: as fast as the slowest subscriber allows.
+    /// This is `handeye feed --rate-hz 0`: as fast as the slowest subscriber allows.
     Lossless { in_flight: usize, timeout: Duration },
 }
 

@@ -1,0 +1,352 @@
+//! The reports the CLI's own processes hand each other: a run's summary (`handeye run --json`,
+//! `run.json`), read by `handeye batch`, and a batch's result (`handeye batch --json`,
+//! `batch.json`). The simulator's report is [`handeye_sim::referee::report::SimReport`], the daemon's
+//! [`handeye_daemon::DaemonOutcome`].
+//!
+//! Writer and reader share one type, so that a renamed or missing field is an error that
+//! names it (unknown fields are refused, and an `Option` field must be present, as `null`
+//! when there is no value) instead of a silent `null`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use handeye_daemon::phase::TargetSource;
+use handeye_wire::report::required;
+use handeye_wire::report::{Failure, FailureKind};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+/// Reads a report another process wrote; an error names the file and the field.
+pub fn read_report<T: DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))
+}
+
+/// A value as its report shows it: compact JSON, `null` for `None`.
+pub fn as_json<T: Serialize + ?Sized>(value: &T) -> String {
+    serde_json::to_string(value).unwrap_or_else(|e| format!("({e})"))
+}
+
+/// One closed-loop run, merged from the simulator's verdict and the daemon's outcome (see
+/// `handeye run --help`). `None` (`null`) where the process that knows it reported nothing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSummary {
+    pub scenario: String,
+    /// The simulator judged the task's target lifted and held.
+    pub success: bool,
+    /// The daemon's furthest phase.
+    #[serde(deserialize_with = "required")]
+    pub phase_reached: Option<String>,
+    #[serde(deserialize_with = "required")]
+    pub final_phase: Option<String>,
+    /// Why the run failed, in words (`failure.detail`); `null` on success.
+    #[serde(deserialize_with = "required")]
+    pub failure_reason: Option<String>,
+    /// Why the run failed, typed; `null` on success.
+    #[serde(deserialize_with = "required")]
+    pub failure: Option<Failure>,
+    #[serde(deserialize_with = "required")]
+    pub target_source: Option<TargetSource>,
+    /// The task's target block.
+    #[serde(deserialize_with = "required")]
+    pub target_block: Option<String>,
+    /// The block and face the daemon's target trackers were put on (ground truth).
+    #[serde(deserialize_with = "required")]
+    pub targeted_block: Option<String>,
+    #[serde(deserialize_with = "required")]
+    pub targeted_face: Option<String>,
+    /// The operator's indicated point, robot frame, m.
+    pub indicated_point_m: [f64; 3],
+    #[serde(deserialize_with = "required")]
+    pub plan_facets: Option<usize>,
+    #[serde(deserialize_with = "required")]
+    pub plan_candidates: Option<usize>,
+    #[serde(deserialize_with = "required")]
+    pub plan_width_mm: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub planner_ms: Option<f64>,
+    /// Frames the daemon answered while the planner worked.
+    #[serde(deserialize_with = "required")]
+    pub planning_frames: Option<u64>,
+    /// Gripper tracker updates (left, right) while the planner worked.
+    #[serde(deserialize_with = "required")]
+    pub gripper_updates_while_planning: Option<[u64; 2]>,
+    /// The same per second of simulated time, as the simulator saw the telemetry, Hz.
+    #[serde(deserialize_with = "required")]
+    pub gripper_update_rate_hz: Option<[f64; 2]>,
+    #[serde(deserialize_with = "required")]
+    pub servo_steps: Option<u32>,
+    #[serde(deserialize_with = "required")]
+    pub final_plane_error_mm: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub final_angle_error_deg: Option<f64>,
+    /// The jaw-centre plane's distance from the block's mid-plane when the jaws closed, mm.
+    #[serde(deserialize_with = "required")]
+    pub grasp_plane_error_mm: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub grasp_lateral_error_mm: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub loop_us_p50: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub loop_us_p99: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub loop_us_max: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub deadline_misses: Option<u64>,
+    #[serde(deserialize_with = "required")]
+    pub calibration_residual_px: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub max_lift_mm: Option<f64>,
+    #[serde(deserialize_with = "required")]
+    pub sim_frames: Option<u64>,
+    #[serde(deserialize_with = "required")]
+    pub sim_time_s: Option<f64>,
+    pub wall_s: f64,
+    #[serde(deserialize_with = "required")]
+    pub seed: Option<u64>,
+    pub domain: String,
+    /// The report folder (`--out`), `null` without one.
+    #[serde(deserialize_with = "required")]
+    pub report: Option<String>,
+}
+
+/// A batch's result (see `handeye batch --help`): the totals over every run, the same per
+/// scenario, and every run's summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BatchResult {
+    #[serde(flatten)]
+    pub all: BatchGroup,
+    /// Per scenario, by name.
+    pub scenarios: BTreeMap<String, BatchGroup>,
+    pub failed_runs: Vec<FailedRun>,
+    pub runs_detail: Vec<RunDetail>,
+    /// The `--config` file given to every run.
+    pub daemon_config: Option<String>,
+}
+
+/// Counts and medians over a set of runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BatchGroup {
+    pub runs: usize,
+    pub successes: usize,
+    pub success_rate: f64,
+    /// Failures counted by phase, then kind.
+    pub failures: BTreeMap<String, BTreeMap<FailureKind, usize>>,
+    /// The same groups, with their runs and full reasons.
+    pub failure_list: Vec<FailureGroup>,
+    /// Over the runs that lifted.
+    pub median_servo_steps: Option<f64>,
+    pub median_run_wall_s: Option<f64>,
+    /// The batch's wall time (totals only; `null` per scenario).
+    pub wall_s: Option<f64>,
+}
+
+/// Runs that failed in one phase with one kind of failure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FailureGroup {
+    pub phase: String,
+    pub kind: FailureKind,
+    pub count: usize,
+    pub runs: Vec<GroupRun>,
+}
+
+/// One run of a failure group.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupRun {
+    /// `scenario#seed`.
+    pub run: String,
+    /// The reason in full.
+    pub reason: String,
+}
+
+/// A run that failed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FailedRun {
+    pub scenario: String,
+    pub seed: u64,
+    /// The phase the run got to.
+    pub phase: String,
+    /// The reason in full (`failure.detail`).
+    pub reason: String,
+    pub failure: Failure,
+}
+
+/// One run's summary as `handeye run --json` printed it (`null`: it printed none).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunDetail {
+    pub scenario: String,
+    pub seed: u64,
+    #[serde(deserialize_with = "required")]
+    pub summary: Option<RunSummary>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_daemon::DaemonOutcome;
+    use handeye_sim::referee::report::SimReport;
+
+    /// `text` with the first occurrence of the key `"from"` renamed to `"to"`.
+    fn rename(text: &str, from: &str, to: &str) -> String {
+        let key = format!("\"{from}\":");
+        assert!(text.contains(&key), "{from} is not a key of {text}");
+        text.replacen(&key, &format!("\"{to}\":"), 1)
+    }
+
+    /// A report read across a process boundary refuses a renamed field with an error that
+    /// names it and the file, never reading it as `null`.
+    fn renamed_field_fails<T: DeserializeOwned + std::fmt::Debug>(text: &str, field: &str) {
+        let path = std::env::temp_dir().join(format!("handeye-report-test-{}-{field}.json", std::process::id()));
+        std::fs::write(&path, rename(text, field, &format!("{field}_renamed"))).unwrap();
+        let err = format!("{:#}", read_report::<T>(&path).unwrap_err());
+        let _ = std::fs::remove_file(&path);
+        assert!(err.contains(&format!("`{field}_renamed`")) || err.contains(&format!("missing field `{field}`")), "{err}");
+        assert!(err.contains(&path.display().to_string()), "the error names the file: {err}");
+    }
+
+    /// A top-level field left out is an error that names it, `Option` fields included.
+    fn missing_field_fails<T: DeserializeOwned + std::fmt::Debug>(text: &str, field: &str) {
+        let mut value: serde_json::Value = serde_json::from_str(text).unwrap();
+        assert!(value.as_object_mut().unwrap().remove(field).is_some(), "{field}");
+        let err = serde_json::from_value::<T>(value).unwrap_err().to_string();
+        assert!(err.contains(&format!("missing field `{field}`")), "{err}");
+    }
+
+    fn summary() -> RunSummary {
+        RunSummary {
+            scenario: "pick_cube".into(),
+            success: false,
+            phase_reached: Some("servo".into()),
+            final_phase: Some("failed".into()),
+            failure_reason: Some("servo: not converged after 90 s (60 steps)".into()),
+            failure: Some(Failure::new("servo", FailureKind::NotConverged, "servo: not converged after 90 s (60 steps)")),
+            target_source: Some(TargetSource::Plan),
+            target_block: Some("cube".into()),
+            targeted_block: Some("cube".into()),
+            targeted_face: Some("+x".into()),
+            indicated_point_m: [0.36, 0.02, 0.06],
+            plan_facets: Some(2),
+            plan_candidates: Some(1),
+            plan_width_mm: Some(40.1),
+            planner_ms: Some(3.7),
+            planning_frames: Some(30),
+            gripper_updates_while_planning: Some([30, 30]),
+            gripper_update_rate_hz: Some([30.0, 30.0]),
+            servo_steps: Some(60),
+            final_plane_error_mm: None,
+            final_angle_error_deg: None,
+            grasp_plane_error_mm: None,
+            grasp_lateral_error_mm: None,
+            loop_us_p50: Some(77.8),
+            loop_us_p99: Some(524.3),
+            loop_us_max: Some(1460.8),
+            deadline_misses: Some(1),
+            calibration_residual_px: Some(5.35),
+            max_lift_mm: Some(0.0),
+            sim_frames: Some(1158),
+            sim_time_s: Some(38.6),
+            wall_s: 13.8,
+            seed: Some(1),
+            domain: "run-1".into(),
+            report: None,
+        }
+    }
+
+    #[test]
+    fn a_run_summary_reads_back_as_written() {
+        let s = summary();
+        let text = serde_json::to_string(&s).unwrap();
+        assert_eq!(serde_json::from_str::<RunSummary>(&text).unwrap(), s);
+        // `null` stays `null`: a value that is not there is written, not left out.
+        assert!(text.contains("\"final_plane_error_mm\":null"), "{text}");
+    }
+
+    #[test]
+    fn a_renamed_or_missing_run_summary_field_is_an_error_naming_it() {
+        let text = serde_json::to_string_pretty(&summary()).unwrap();
+        for field in ["success", "failure_reason", "failure", "servo_steps", "final_plane_error_mm", "wall_s", "report"] {
+            renamed_field_fails::<RunSummary>(&text, field);
+            missing_field_fails::<RunSummary>(&text, field);
+        }
+    }
+
+    #[test]
+    fn a_renamed_batch_result_field_is_an_error_naming_it() {
+        let group = BatchGroup {
+            runs: 1,
+            successes: 0,
+            success_rate: 0.0,
+            failures: BTreeMap::from([("servo".to_string(), BTreeMap::from([(FailureKind::NotConverged, 1)]))]),
+            failure_list: vec![FailureGroup {
+                phase: "servo".into(),
+                kind: FailureKind::NotConverged,
+                count: 1,
+                runs: vec![GroupRun { run: "pick_cube#1".into(), reason: "servo: not converged".into() }],
+            }],
+            median_servo_steps: None,
+            median_run_wall_s: Some(13.8),
+            wall_s: Some(14.0),
+        };
+        let failure = Failure::new("servo", FailureKind::NotConverged, "servo: not converged");
+        let batch = BatchResult {
+            all: group.clone(),
+            scenarios: BTreeMap::from([("pick_cube".to_string(), BatchGroup { wall_s: None, ..group })]),
+            failed_runs: vec![FailedRun { scenario: "pick_cube".into(), seed: 1, phase: "servo".into(), reason: failure.detail.clone(), failure }],
+            runs_detail: vec![RunDetail { scenario: "pick_cube".into(), seed: 1, summary: Some(summary()) }],
+            daemon_config: None,
+        };
+        let text = serde_json::to_string(&batch).unwrap();
+        assert_eq!(serde_json::from_str::<BatchResult>(&text).unwrap(), batch);
+        for field in ["successes", "failure_list", "failed_runs", "runs_detail", "kind"] {
+            renamed_field_fails::<BatchResult>(&text, field);
+        }
+    }
+
+    /// The simulator's verdict, as `handeye sim --verdict-out` writes it (pick_cube, seed 1).
+    const SIM_JSON: &str = r#"{"scenario":"pick_cube","mode":"lockstep","frames":1158,"fps":84.2,"wall_s":13.7,"sim_time_s":38.6,
+        "frames_hash":"0123456789abcdef","commands":1158,"reply_timeouts":0,"late_frames":0,"verdict":{"success":{"at_ns":38600000000}},
+        "driver":"commands from handeye/robot/command","max_lift_mm":69.4,"adapter":"llvmpipe","domain":"run-1","commands_rejected":0,
+        "success":true,"seed":1,"target":"cube","indicated_point_m":[0.36,0.02,0.06],
+        "layout":[{"name":"cube","kind":"cube","size_mm":[40.0,40.0,40.0],"position_m":[0.36,0.02],"yaw_deg":0.0}],
+        "daemon":{"phases":[["acquire_gripper",0],["servo",700]],"converged":{"frame":900,"final_plane_error_mm":0.06,"final_angle_error_deg":0.18,
+        "plate_offset_mm":0.06,"jaw_plane_offset_mm":0.04,"lateral_error_mm":0.3,"tool_z_mm":80.0},"grasped":null,"stopped_frame":null,
+        "stop_reason":null,"first_stop_command_frame":null,"target_hidden_frame":null,"telemetry":1158,
+        "targeted":{"frame":600,"block":"cube","face":"+x","is_task_target":true,"outline_error_px":0.4},
+        "plan":{"frames":40,"planning_frames":30,"gripper_updates_while_planning":[30,30],"max_update_step":1,"planning_window_s":1.0,
+        "gripper_update_rate_hz":[30.0,30.0],"frame_rate_hz":30.0}}}"#;
+
+    #[test]
+    fn a_renamed_sim_report_field_is_an_error_naming_it() {
+        let report: SimReport = serde_json::from_str(SIM_JSON).unwrap();
+        assert!(report.success);
+        assert_eq!(report.daemon.targeted.as_ref().map(|t| t.face.as_str()), Some("+x"));
+        for field in ["success", "target", "verdict", "targeted", "is_task_target", "gripper_update_rate_hz", "grasped", "stop_reason"] {
+            renamed_field_fails::<SimReport>(SIM_JSON, field);
+        }
+        for field in ["success", "max_lift_mm", "daemon"] {
+            missing_field_fails::<SimReport>(SIM_JSON, field);
+        }
+        // The watch's optional parts too: `null` when nothing was seen, but never left out.
+        let mut value: serde_json::Value = serde_json::from_str(SIM_JSON).unwrap();
+        value.as_object_mut().unwrap()["daemon"].as_object_mut().unwrap().remove("targeted");
+        let err = serde_json::from_value::<SimReport>(value).unwrap_err().to_string();
+        assert!(err.contains("missing field `targeted`"), "{err}");
+    }
+
+    #[test]
+    fn a_renamed_daemon_outcome_field_is_an_error_naming_it() {
+        // daemon.json of `handeye run scenarios/pick_cube.toml` (its servo trace cut to two rows).
+        let text = include_str!("testdata/daemon_outcome.json");
+        serde_json::from_str::<DaemonOutcome>(text).unwrap();
+        // Fields `handeye run` reads; the daemon's type requires each of them.
+        for field in ["phase_reached", "servo_steps", "loop_us_p50", "deadline_misses"] {
+            renamed_field_fails::<DaemonOutcome>(text, field);
+        }
+    }
+}
