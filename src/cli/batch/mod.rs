@@ -2,7 +2,6 @@
 //! progress bar, a success-rate table with the failures by phase and kind, and a report
 //! page per run.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,10 +13,12 @@ use clap::Args;
 use handeye_wire::report::{Failure, FailureKind};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::report::{BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, RunDetail, RunSummary};
+use super::report::RunSummary;
+use summary::{summarise, table, Job, Outcome};
 use super::units::parse_seconds;
 
 mod pages;
+mod summary;
 
 /// Run many closed-loop grasp scenarios and report how often they succeed.
 ///
@@ -93,36 +94,6 @@ extern "C" fn on_signal(_: libc::c_int) {
     INTERRUPTED.store(true, Ordering::SeqCst);
 }
 
-/// One run to make.
-#[derive(Debug, Clone)]
-struct Job {
-    scenario: PathBuf,
-    name: String,
-    seed: u64,
-    out: Option<PathBuf>,
-}
-
-/// What one run gave.
-#[derive(Debug, Clone)]
-struct Outcome {
-    job: Job,
-    success: bool,
-    /// The working phase the run got to (`run` when `handeye run` itself failed).
-    phase: String,
-    /// Why it failed (`None` when it lifted).
-    failure: Option<Failure>,
-    servo_steps: Option<f64>,
-    wall_s: f64,
-    /// What `handeye run --json` printed (`None`: nothing usable).
-    summary: Option<RunSummary>,
-}
-
-impl Outcome {
-    fn reason(&self) -> Option<&str> {
-        self.failure.as_ref().map(|f| f.detail.as_str())
-    }
-}
-
 fn scenario_name(path: &Path) -> Result<String> {
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let scenario = handeye_sim::Scenario::parse(&text, path)?;
@@ -146,16 +117,6 @@ fn collect_scenarios(path: &Path) -> Result<Vec<PathBuf>> {
     } else {
         bail!("{}: no such scenario file or folder", path.display())
     }
-}
-
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
 }
 
 fn tail(text: &str, lines: usize) -> String {
@@ -316,149 +277,4 @@ pub fn run(args: BatchArgs) -> Result<()> {
         eprintln!("batch: interrupted after {} of the runs", outcomes.len());
     }
     Ok(())
-}
-
-/// Counts and medians over `outcomes`; failures grouped by the phase they happened in and
-/// their kind.
-fn group(outcomes: &[&Outcome], wall_s: Option<f64>) -> BatchGroup {
-    let runs = outcomes.len();
-    let successes = outcomes.iter().filter(|o| o.success).count();
-    let mut groups: BTreeMap<(String, FailureKind), Vec<GroupRun>> = BTreeMap::new();
-    for o in outcomes {
-        if let Some(f) = &o.failure {
-            groups.entry((f.phase.clone(), f.kind)).or_default().push(GroupRun { run: format!("{}#{}", o.job.name, o.job.seed), reason: f.detail.clone() });
-        }
-    }
-    let mut failures: BTreeMap<String, BTreeMap<FailureKind, usize>> = BTreeMap::new();
-    for ((phase, kind), runs) in &groups {
-        failures.entry(phase.clone()).or_default().insert(*kind, runs.len());
-    }
-    BatchGroup {
-        runs,
-        successes,
-        success_rate: if runs > 0 { successes as f64 / runs as f64 } else { 0.0 },
-        failures,
-        failure_list: groups.into_iter().map(|((phase, kind), runs)| FailureGroup { phase, kind, count: runs.len(), runs }).collect(),
-        median_servo_steps: median(outcomes.iter().filter(|o| o.success).filter_map(|o| o.servo_steps).collect()),
-        median_run_wall_s: median(outcomes.iter().map(|o| o.wall_s).collect()),
-        wall_s,
-    }
-}
-
-fn summarise(outcomes: &[Outcome], wall_s: f64, daemon_config: Option<String>) -> BatchResult {
-    let all: Vec<&Outcome> = outcomes.iter().collect();
-    let mut names: Vec<&str> = outcomes.iter().map(|o| o.job.name.as_str()).collect();
-    names.dedup();
-    BatchResult {
-        all: group(&all, Some(wall_s)),
-        scenarios: names.iter().map(|n| (n.to_string(), group(&outcomes.iter().filter(|o| o.job.name == *n).collect::<Vec<_>>(), None))).collect(),
-        failed_runs: outcomes
-            .iter()
-            .filter_map(|o| {
-                let failure = o.failure.clone()?;
-                Some(FailedRun { scenario: o.job.name.clone(), seed: o.job.seed, phase: o.phase.clone(), reason: failure.detail.clone(), failure })
-            })
-            .collect(),
-        runs_detail: outcomes.iter().map(|o| RunDetail { scenario: o.job.name.clone(), seed: o.job.seed, summary: o.summary.clone() }).collect(),
-        daemon_config,
-    }
-}
-
-fn table(report: &BatchResult) -> String {
-    use std::fmt::Write;
-    let mut s = String::new();
-    let f = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |x| format!("{x:.1}{unit}"));
-    let _ = writeln!(s, "{:<24} {:>5} {:>9} {:>8} {:>12} {:>10}", "scenario", "runs", "lifted", "rate", "servo steps", "run wall");
-    let row = |s: &mut String, name: &str, g: &BatchGroup| {
-        let _ = writeln!(
-            s,
-            "{:<24} {:>5} {:>9} {:>7.0}% {:>12} {:>10}",
-            name,
-            g.runs,
-            g.successes,
-            100.0 * g.success_rate,
-            f(g.median_servo_steps, ""),
-            f(g.median_run_wall_s, " s")
-        );
-    };
-    for (name, g) in &report.scenarios {
-        row(&mut s, name, g);
-    }
-    row(&mut s, "all", &report.all);
-    if !report.all.failure_list.is_empty() {
-        let _ = writeln!(s, "\nfailures by phase and kind:");
-        for g in &report.all.failure_list {
-            let runs: Vec<&str> = g.runs.iter().map(|r| r.run.as_str()).collect();
-            let _ = writeln!(s, "  {:>3} x {}: {} ({})", g.count, g.phase, g.kind, runs.join(", "));
-            for r in &g.runs {
-                let _ = writeln!(s, "          {}: {}", r.run, r.reason);
-            }
-        }
-    }
-    let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report.all.wall_s.unwrap_or(0.0));
-    s
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn outcome(seed: u64, failure: Option<(&str, FailureKind, &str)>, steps: Option<f64>) -> Outcome {
-        Outcome {
-            job: Job { scenario: PathBuf::from("c.toml"), name: "c".into(), seed, out: None },
-            success: failure.is_none(),
-            phase: failure.map_or("done", |f| f.0).into(),
-            failure: failure.map(|(phase, kind, detail)| Failure::new(phase, kind, detail)),
-            servo_steps: steps,
-            wall_s: 40.0 + seed as f64,
-            summary: None,
-        }
-    }
-
-    #[test]
-    fn the_summary_counts_failures_by_phase_and_kind() {
-        let not_converged = |steps| format!("servo: not converged after 90 s ({steps} steps)");
-        let (c2, c4) = (not_converged(60), not_converged(61));
-        let runs = [
-            outcome(1, None, Some(3.0)),
-            outcome(2, Some(("servo", FailureKind::NotConverged, &c2)), Some(60.0)),
-            outcome(3, None, Some(5.0)),
-            outcome(4, Some(("servo", FailureKind::NotConverged, &c4)), None),
-            outcome(5, Some(("plan", FailureKind::NoGraspSite, "plan: no grasp site within 60 mm of the indicated point (the nearest is 75 mm away)")), None),
-            // Same phase, another kind: a group of its own, whatever the words.
-            outcome(6, Some(("servo", FailureKind::TrackerLost, "servo: not converged: the target tracker was lost")), None),
-        ];
-        let r = summarise(&runs, 210.0, None);
-        assert_eq!((r.all.runs, r.all.successes), (6, 2));
-        assert!((r.all.success_rate - 2.0 / 6.0).abs() < 1e-12);
-        assert_eq!(r.all.failures["servo"][&FailureKind::NotConverged], 2);
-        assert_eq!(r.all.failures["servo"][&FailureKind::TrackerLost], 1);
-        assert_eq!(r.all.failures["plan"].len(), 1);
-        // One group per (phase, kind), with each run's reason in full.
-        assert_eq!(r.all.failure_list.len(), 3);
-        let servo = r.all.failure_list.iter().find(|g| g.phase == "servo" && g.kind == FailureKind::NotConverged).unwrap();
-        assert_eq!(servo.count, 2);
-        assert_eq!(servo.runs, vec![GroupRun { run: "c#2".into(), reason: c2.clone() }, GroupRun { run: "c#4".into(), reason: c4.clone() }]);
-        // Median servo steps over the runs that lifted only; wall times over all.
-        assert_eq!(r.all.median_servo_steps, Some(4.0));
-        assert_eq!(r.all.median_run_wall_s, Some(43.5));
-        assert_eq!(r.all.wall_s, Some(210.0));
-        assert_eq!(r.failed_runs.len(), 4);
-        assert_eq!(r.failed_runs[0].reason, c2);
-        assert_eq!(r.scenarios["c"].runs, 6);
-        assert_eq!(r.scenarios["c"].wall_s, None);
-        assert_eq!(r.runs_detail.len(), 6);
-        let t = table(&r);
-        assert!(t.contains("  2 x servo: not_converged (c#2, c#4)"), "{t}");
-        assert!(t.contains(&format!("c#4: {c4}")), "{t}");
-        assert!(t.contains("  1 x servo: tracker_lost (c#6)"), "{t}");
-        assert!(t.contains("33%"), "{t}");
-    }
-
-    #[test]
-    fn medians() {
-        assert_eq!(median(vec![3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), Some(2.5));
-        assert_eq!(median(vec![f64::NAN]), None);
-    }
 }

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use super::{table, Outcome};
+use super::summary::{table, Outcome};
 use crate::cli::report::{as_json, BatchResult, RunSummary};
 
 /// The run page's table: a summary's fields as its JSON shows them (`null` throughout when
