@@ -3,7 +3,7 @@
 //! (stamped with the frame's id; `Hold` when there is nothing to do) and one telemetry
 //! sample. A cycle hands out everything it produced ([`CycleOutput`]: the command and the
 //! report material); the telemetry follows from [`HardLoop::finish_cycle`].
-//! [`crate::service`] wraps it in the shared-memory transport; tests drive it in-process.
+//! `service.rs` wraps it in the shared-memory transport; tests drive it in-process.
 //!
 //! Everything is allocated up front: in the servo's steady state a cycle allocates nothing
 //! (`tests/daemon_inprocess.rs` counts). The exceptions are the moments that are meant to:

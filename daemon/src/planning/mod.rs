@@ -1,7 +1,7 @@
 //! The plan phase's work on the worker thread (thesis ch. 5-6): mask the gripper out of one
 //! stereo pair, find facets with the planner, turn them into a grasp scene in robot
 //! coordinates through the calibrated affine model, plan grasps, and pick the one nearest
-//! the indicated point. Pure (no I/O); [`crate::phase::plan`] runs it and takes the result.
+//! the indicated point. Pure (no I/O); the plan phase (`phase/plan.rs`) runs it and takes the result.
 //!
 //! **Coordinates.** The calibration maps *tool* positions to the images of the plate's
 //! reference point: `w = M X_tool + c`. A scene point `P` seen at `w` is where the reference
