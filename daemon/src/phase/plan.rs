@@ -23,7 +23,7 @@ use super::job::PendingJob;
 use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
 use crate::gripper::tool_from_reference;
 use crate::mission::{Mission, PlanningStats, TargetSource, TargetSpec};
-use crate::planning::{PlanOutput, PlanRequest, PlannedTarget};
+use crate::planning::{PlanCalibration, PlanOutput, PlanRequest, PlannedTarget, SceneLimits};
 
 enum Stage {
     /// Going to the park pose (if not there).
@@ -176,18 +176,22 @@ impl PlanPhase {
                 // Allocates once: the pair the planner works on.
                 let request = PlanRequest {
                     images: [c.left.to_owned(), c.right.to_owned()],
-                    model: cal.model.clone(),
-                    cage_robot_m: cal.cage_robot_m.clone(),
-                    cage_image_px: cal.cage_image_px.clone(),
-                    lever_m: [lever.x, lever.y, lever.z],
+                    calibration: PlanCalibration {
+                        model: cal.model.clone(),
+                        cage_robot_m: cal.cage_robot_m.clone(),
+                        cage_image_px: cal.cage_image_px.clone(),
+                        lever_m: [lever.x, lever.y, lever.z],
+                    },
                     masks,
                     mask_margin_px: p.mask_margin_px,
-                    indicated_m: m.targeting.indicated_m(),
-                    max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
-                    max_distance_m: p.max_site_distance_m,
-                    join_m: p.join_m,
-                    front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
-                    rear_edges_from_image: p.rear_edges_from_image,
+                    scene: SceneLimits {
+                        indicated_m: m.targeting.indicated_m(),
+                        max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
+                        max_distance_m: p.max_site_distance_m,
+                        join_m: p.join_m,
+                        front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
+                        rear_edges_from_image: p.rear_edges_from_image,
+                    },
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,
