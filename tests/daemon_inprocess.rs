@@ -125,8 +125,8 @@ fn a_robot_fault_stops_the_arm_with_the_reason() {
     // Afterwards it holds; the stop is not repeated.
     assert_eq!(run.step().kind, CommandKind::Hold as u32);
     let o = run.daemon.outcome(0.0);
-    assert!(!o.success);
-    assert_eq!(o.phase_reached, "calibrate");
-    assert_eq!(o.final_phase, "stopped");
+    assert!(!o.end.success);
+    assert_eq!(o.end.phase_reached, "calibrate");
+    assert_eq!(o.end.final_phase, "stopped");
 }
 

@@ -29,7 +29,7 @@ fn the_gripper_is_tracked_on_every_frame_while_the_planner_works() {
             continue;
         }
         planning_frames += 1;
-        computing_frames += u64::from(run.daemon.mission.worker.computing());
+        computing_frames += u64::from(run.daemon.mission().worker.computing());
         let now = [t.tracker_updates[0], t.tracker_updates[1]];
         if let Some(p) = previous {
             assert_eq!(now, [p[0] + 1, p[1] + 1], "gripper tracker updates on frame {} while planning", run.frame);
@@ -42,10 +42,10 @@ fn the_gripper_is_tracked_on_every_frame_while_the_planner_works() {
     }
     assert!(planning_frames >= WORKER_DELAY_FRAMES, "only {planning_frames} frames answered while planning");
     assert!(computing_frames >= 1, "the planner never outlasted a frame: the test would not show tracking during planning");
-    let stats = run.daemon.mission.planning.expect("planning stats");
+    let stats = run.daemon.mission().planning.stats().expect("planning stats");
     assert_eq!(stats.gripper_updates, [stats.frames, stats.frames], "{stats:?}");
     // The chosen facet lies on the block nearest the indicated point (ground truth).
-    let target = run.daemon.mission.target.clone().expect("a target from the plan");
+    let target = run.daemon.mission().targeting.target().cloned().expect("a target from the plan");
     let (facet, error_px) = handeye_sim::referee::watch::identify_facet(&run.runner.sim, &target.left_px, &target.right_px).expect("a block face");
     assert_eq!(facet.block, run.runner.sim.target_index(), "planned facet on block {}", run.runner.sim.world.blocks[facet.block].name);
     assert!(error_px < 3.0, "planned outline {error_px:.1} px off the face");

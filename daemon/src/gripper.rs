@@ -7,7 +7,7 @@ use handeye_vision::image::ImageView;
 use handeye_vision::locate::Motion;
 use handeye_vision::servo::{AffineFrame, GripperView, StereoFrame, StereoPoint};
 use handeye_vision::tracker::ContourTracker;
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
 
 use crate::config::GripperModel;
 
@@ -41,6 +41,23 @@ impl PlateTemplate {
             b_axis_st: dir([0.0, 1.0]),
         }
     }
+}
+
+/// Unit plate normal in the robot frame at tool yaw `yaw_rad` (horizontal).
+pub fn plate_normal(model: &GripperModel, yaw_rad: f64) -> Vector3<f64> {
+    let n0 = model.normal_at_zero_yaw;
+    let (s, c) = yaw_rad.sin_cos();
+    Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).normalize()
+}
+
+/// `tool − reference` in the robot frame at tool yaw `yaw_rad`: the lever from the plate's
+/// reference point (what the cameras see) to the tool point (what the robot moves).
+pub fn tool_from_reference(model: &GripperModel, yaw_rad: f64) -> Vector3<f64> {
+    let n = plate_normal(model, yaw_rad);
+    let up = Vector3::z();
+    let a = up.cross(&n);
+    let t = model.tool_from_reference_m;
+    a * t[0] + up * t[1] + n * t[2]
 }
 
 fn v2(p: [f64; 2]) -> Vector2<f64> {

@@ -1,8 +1,9 @@
 //! The hard loop's per-frame work, without I/O: update the trackers over the frame's pixels
 //! in place, run the safety checks and the current phase, and produce exactly one command
 //! (stamped with the frame's id; `Hold` when there is nothing to do) and one telemetry
-//! sample. [`crate::service`] wraps it in the shared-memory transport; tests drive it
-//! in-process.
+//! sample. A cycle hands out everything it produced ([`CycleOutput`]: the command and the
+//! report material); the telemetry follows from [`HardLoop::finish_cycle`].
+//! `service.rs` wraps it in the shared-memory transport; tests drive it in-process.
 //!
 //! Everything is allocated up front: in the servo's steady state a cycle allocates nothing
 //! (`tests/daemon_inprocess.rs` counts). The exceptions are the moments that are meant to:
@@ -11,16 +12,30 @@
 
 use handeye_vision::image::ImageView;
 use handeye_vision::tracker::{Role, StereoStates, View};
+use handeye_wire::hint::OperatorHint;
+use handeye_wire::report::{Failure, FailureKind};
 use handeye_wire::{
     monotonic_ns, robot_flags, Phase, RobotCommand, RobotState, Telemetry, NO_FRAME, TELEMETRY_CORNERS, WIRE_VERSION,
 };
 
 use crate::config::DaemonConfig;
-use handeye_wire::hint::OperatorHint;
-use crate::outcome::DaemonOutcome;
-use crate::phase::{acquire_gripper::AcquireGripper, Cmd, Cycle, Mission, PhaseState, Step};
-use crate::recovery::RecoveryStep;
+use crate::fault::Fault;
+use crate::mission::{Mission, ReportRequests};
+use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord};
+use crate::phase::acquire_gripper::AcquireGripper;
+use crate::phase::step::{Cmd, Cycle, Step};
+use crate::phase::PhaseState;
+use crate::recovery::{Recovery, RecoveryStep};
 use crate::safety::{check_robot, check_trackers};
+use crate::timing::LatencyHistogram;
+
+/// What one cycle produced: the command answering the frame, and what it asked the report
+/// for.
+#[derive(Debug)]
+pub struct CycleOutput {
+    pub command: RobotCommand,
+    pub reports: ReportRequests,
+}
 
 /// The view whose gripper and target trackers are both lost (or unsure) while the other
 /// view tracks both confidently.
@@ -33,12 +48,11 @@ fn moved_view(states: &StereoStates, trackers: &handeye_vision::tracker::StereoT
         !ok(Role::Gripper, v) && !ok(Role::Target, v) && ok(Role::Gripper, other) && ok(Role::Target, other)
     })
 }
-use crate::timing::LatencyHistogram;
 
 /// The daemon's state between frames.
 pub struct HardLoop {
-    pub mission: Mission,
-    pub phase: PhaseState,
+    mission: Mission,
+    phase: PhaseState,
     timing: LatencyHistogram,
     seq: u64,
     frames: u64,
@@ -49,21 +63,20 @@ pub struct HardLoop {
     rejected_seq: Option<u64>,
     /// Furthest working phase entered.
     phase_reached: Phase,
-    failure: Option<String>,
-    command: RobotCommand,
+    failure: Option<Failure>,
     telemetry: Telemetry,
     stopped_at_frame: Option<u64>,
     /// Re-acquiring one view after its camera moved (servo only).
-    recovery: Option<crate::recovery::Recovery>,
+    recovery: Option<Recovery>,
     /// Camera knocks recovered from.
-    pub recoveries: u32,
+    recoveries: u32,
 }
 
 impl HardLoop {
     pub fn new(cfg: DaemonConfig, hint: Option<OperatorHint>) -> std::io::Result<Self> {
         let deadline_ns = cfg.deadline_us * 1000;
         Ok(Self {
-            mission: Mission::new(cfg, hint)?,
+            mission: Mission::new(cfg, hint.as_ref())?,
             phase: PhaseState::AcquireGripper(AcquireGripper::new(0)),
             timing: LatencyHistogram::new(deadline_ns),
             seq: 0,
@@ -75,7 +88,6 @@ impl HardLoop {
             rejected_seq: None,
             phase_reached: Phase::AcquireGripper,
             failure: None,
-            command: RobotCommand::default(),
             telemetry: Telemetry::default(),
             stopped_at_frame: None,
             recovery: None,
@@ -86,7 +98,7 @@ impl HardLoop {
     /// The operator's indicated point on the working plane (robot frame, m): the plan phase
     /// executes the grasp site nearest it (without one, the highest).
     pub fn set_indicated_point(&mut self, point_m: Option<[f64; 3]>) {
-        self.mission.indicated_m = point_m;
+        self.mission.targeting.set_indicated_m(point_m);
     }
 
     /// One robot state sample (the transport drains them all before each cycle). A reading
@@ -96,28 +108,29 @@ impl HardLoop {
             self.rejected_seq = Some(s.last_command_seq);
         }
         if self.failure.is_none()
-            && let Err(reason) = check_robot(&self.mission.cfg.safety, self.robot.as_ref(), s)
+            && let Err(fault) = check_robot(&self.mission.cfg.safety, self.robot.as_ref(), s)
         {
-            self.stop_reason(Phase::Stopped, reason);
+            self.stop_reason(Phase::Stopped, fault);
         }
-        if self.mission.start_pose.is_none() {
-            self.mission.start_pose = Some((s.tool_pos_m.map(f64::from), f64::from(s.tool_yaw_rad)));
-        }
+        self.mission.calibration.note_start_pose(s.tool_pos_m.map(f64::from), f64::from(s.tool_yaw_rad));
         self.robot = Some(*s);
         self.robot_frame = self.frames;
         self.robot_states += 1;
     }
 
-    fn stop_reason(&mut self, phase: Phase, reason: String) {
-        tracing::warn!(phase = phase.name(), %reason, "arm stopped");
-        self.failure = Some(reason);
+    /// Ends the run as `phase` (failed or stopped) with `fault`, raised in the phase current
+    /// until now.
+    fn stop_reason(&mut self, phase: Phase, fault: Fault) {
+        tracing::warn!(phase = phase.name(), reason = %fault, "arm stopped");
+        self.failure = Some(fault.in_phase(self.phase.phase()));
         self.phase = if phase == Phase::Failed { PhaseState::Failed } else { PhaseState::Stopped };
-        self.mission.snapshot = Some(if phase == Phase::Failed { "failed" } else { "stopped" });
+        self.mission.reporting.snapshot(if phase == Phase::Failed { "failed" } else { "stopped" });
     }
 
-    /// Processes one stereo frame and returns the command answering it. Call
-    /// [`Self::finish_cycle`] with the cycle's duration before publishing the telemetry.
-    pub fn cycle(&mut self, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> &RobotCommand {
+    /// Processes one stereo frame and returns what it produced: the command answering it and
+    /// the report requests. Call [`Self::finish_cycle`] with the cycle's duration before
+    /// publishing the telemetry.
+    pub fn cycle(&mut self, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> CycleOutput {
         let frame_index = self.frames;
         self.frames += 1;
         let gap = self.last_frame_id.map_or(1, |last| frame_id.saturating_sub(last).max(1));
@@ -136,9 +149,9 @@ impl HardLoop {
         } else {
             cmd
         };
-        self.command = self.stamp(&cmd, frame_id);
+        let command = self.stamp(&cmd, frame_id);
         self.fill_telemetry(frame_id, &states);
-        &self.command
+        CycleOutput { command, reports: self.mission.reporting.take_requests() }
     }
 
     fn decide(&mut self, frame_index: u64, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
@@ -147,12 +160,13 @@ impl HardLoop {
         }
         let Some(robot) = self.robot else {
             if frame_index >= u64::from(self.mission.cfg.safety.state_stale_frames) {
-                self.stop_reason(Phase::Stopped, "no robot state received".into());
+                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::RobotState, "no robot state received"));
             }
             return Cmd::HOLD;
         };
         if frame_index.saturating_sub(self.robot_frame) > u64::from(self.mission.cfg.safety.state_stale_frames) {
-            self.stop_reason(Phase::Stopped, format!("no robot state for {} frames", frame_index - self.robot_frame));
+            let detail = format!("no robot state for {} frames", frame_index - self.robot_frame);
+            self.stop_reason(Phase::Stopped, Fault::new(FailureKind::RobotState, detail));
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
@@ -165,7 +179,7 @@ impl HardLoop {
                 RecoveryStep::Recovered { shift_px } => {
                     tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
                     self.recoveries += 1;
-                    self.mission.snapshot = Some("reacquired");
+                    self.mission.reporting.snapshot("reacquired");
                     let view = rec.view;
                     if let PhaseState::Servo(p) = &mut self.phase {
                         p.resume(&mut self.mission, view, shift_px);
@@ -175,32 +189,33 @@ impl HardLoop {
                 }
                 RecoveryStep::Failed(reason) => {
                     self.recovery = None;
-                    self.stop_reason(Phase::Stopped, format!("camera moved, trackers not re-acquired: {reason}"));
+                    let detail = format!("camera moved, trackers not re-acquired: {reason}");
+                    self.stop_reason(Phase::Stopped, Fault::new(FailureKind::Camera, detail));
                     return Cmd::STOP;
                 }
             }
         }
-        if let Err(reason) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
+        if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // Both trackers of one view lost while the other view holds both: that camera
             // moved. Stop the arm and try to re-acquire (servo only; elsewhere, stop).
             if phase == Phase::Servo
                 && let Some(view) = moved_view(&states, &self.mission.trackers, self.mission.cfg.safety.min_tracker_score)
-                && let Some(rec) = crate::recovery::Recovery::start(&self.mission.trackers, view, frame_index)
+                && let Some(rec) = Recovery::start(&self.mission.trackers, view, frame_index)
             {
-                tracing::warn!(?view, %reason, "a camera seems to have moved: stopping and re-acquiring");
+                tracing::warn!(?view, reason = %fault, "a camera seems to have moved: stopping and re-acquiring");
                 self.recovery = Some(rec);
-                self.mission.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
-                self.mission.snapshot = Some("camera_moved");
+                self.mission.reporting.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
+                self.mission.reporting.snapshot("camera_moved");
                 return Cmd::STOP;
             }
-            self.stop_reason(Phase::Stopped, reason);
+            self.stop_reason(Phase::Stopped, fault);
             return Cmd::STOP;
         }
         let cycle = Cycle { frame_index, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         match self.phase.step(&mut self.mission, &cycle) {
             Step::Stay(c) | Step::Next(c) => c,
-            Step::Fail(reason) => {
-                self.stop_reason(Phase::Failed, reason);
+            Step::Fail(fault) => {
+                self.stop_reason(Phase::Failed, fault);
                 Cmd::STOP
             }
         }
@@ -257,14 +272,14 @@ impl HardLoop {
             }
         }
         let in_servo = phase == Phase::Servo;
-        for (dst, src) in t.servo_error.iter_mut().zip(self.mission.servo_error) {
+        for (dst, src) in t.servo_error.iter_mut().zip(self.mission.servo.error()) {
             *dst = if in_servo && src.is_finite() { src as f32 } else { f32::NAN };
         }
-        t.servo_steps = self.mission.servo_steps;
+        t.servo_steps = self.mission.servo.steps();
         t.planning = u32::from(self.mission.worker.busy());
         match &self.failure {
-            Some(reason) => t.set_reason(reason),
-            None => t.set_reason(&self.mission.status),
+            Some(failure) => t.set_reason(&failure.detail),
+            None => t.set_reason(self.mission.reporting.status()),
         }
     }
 
@@ -280,9 +295,9 @@ impl HardLoop {
 
     /// Stops the arm outside a frame (stale or vanished camera stream, interrupt): the
     /// command (`Stop`, answering no frame) and the telemetry saying why.
-    pub fn safety_stop(&mut self, reason: &str) -> (RobotCommand, Telemetry) {
+    pub fn safety_stop(&mut self, fault: Fault) -> (RobotCommand, Telemetry) {
         if !self.phase.is_terminal() {
-            self.stop_reason(Phase::Stopped, reason.to_string());
+            self.stop_reason(Phase::Stopped, fault);
         }
         if self.stopped_at_frame.is_none() {
             self.stopped_at_frame = Some(NO_FRAME);
@@ -321,11 +336,62 @@ impl HardLoop {
 
     /// What happened, for `daemon.json`.
     pub fn outcome(&self, wall_s: f64) -> DaemonOutcome {
-        DaemonOutcome::from_loop(self, wall_s)
+        let t = self.timing();
+        let us = |ns: u64| ns as f64 / 1000.0;
+        let phase = self.phase();
+        let m = self.mission();
+        DaemonOutcome {
+            end: RunEnd {
+                success: phase == handeye_wire::Phase::Done,
+                phase_reached: self.phase_reached().name().to_string(),
+                final_phase: phase.name().to_string(),
+                failure_reason: self.failure().map(|f| f.detail.clone()),
+                failure: self.failure().cloned(),
+                servo_steps: m.servo.steps(),
+            },
+            timing: LoopTiming {
+                loop_us_p50: us(t.percentile_ns(50.0)),
+                loop_us_p99: us(t.percentile_ns(99.0)),
+                loop_us_max: us(t.max_ns()),
+                loop_us_mean: t.mean_ns() / 1000.0,
+                deadline_us: t.deadline_ns() / 1000,
+                deadline_misses: t.deadline_misses(),
+                cycles: t.count(),
+                robot_states: self.robot_states(),
+            },
+            task: TaskRecord {
+                calibration: m.calibration.stats(),
+                target_source: m.targeting.source(),
+                plan: m.planning.summary().cloned(),
+                planning: m.planning.stats(),
+                target_attempts: m.targeting.attempts(),
+                grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
+                stop_frame_id: self.stopped_at_frame(),
+                recoveries: self.recoveries(),
+            },
+            servo_trace: m.servo.trace().to_vec(),
+            wall_s,
+        }
     }
 
-    pub fn failure(&self) -> Option<&str> {
-        self.failure.as_deref()
+    /// What ended the run, typed (`None` while it runs, or when it succeeded).
+    pub fn failure(&self) -> Option<&Failure> {
+        self.failure.as_ref()
+    }
+
+    /// The state across phases, to read (tests, the outcome).
+    pub fn mission(&self) -> &Mission {
+        &self.mission
+    }
+
+    /// Camera knocks the trackers recovered from.
+    pub fn recoveries(&self) -> u32 {
+        self.recoveries
+    }
+
+    /// The configuration the loop runs with.
+    pub fn config(&self) -> &DaemonConfig {
+        &self.mission.cfg
     }
 
     pub fn phase_reached(&self) -> Phase {

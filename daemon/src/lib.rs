@@ -10,8 +10,10 @@
 //! all against the `handeye/*` services of a domain, whoever publishes them.
 
 pub mod config;
+pub mod fault;
 pub mod gripper;
 pub mod hard_loop;
+pub mod mission;
 pub mod outcome;
 pub mod phase;
 pub mod planning;
@@ -24,6 +26,7 @@ pub mod timing;
 pub mod worker;
 
 pub use config::DaemonConfig;
-pub use hard_loop::HardLoop;
+pub use fault::Fault;
+pub use hard_loop::{CycleOutput, HardLoop};
 pub use handeye_wire::hint::OperatorHint;
 pub use outcome::DaemonOutcome;

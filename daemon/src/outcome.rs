@@ -1,13 +1,31 @@
 //! The daemon's account of a run (`daemon.json`, and what `handeye daemon --json` prints).
+//!
+//! One flat JSON object; in Rust its fields come in groups ([`RunEnd`], [`LoopTiming`],
+//! [`TaskRecord`]) flattened into it, so the file keeps its documented shape. Every field a
+//! reader relies on is required: a renamed key is an error that names it, not a silent
+//! `null` (an `Option` field may be absent, and then reads as `None`).
 
 use serde::{Deserialize, Serialize};
 
-use crate::hard_loop::HardLoop;
-use crate::phase::{CalibrationStats, PlanningStats, ServoTraceRow, TargetSource};
+use crate::mission::{CalibrationStats, PlanningStats, ServoTraceRow, TargetSource};
 use crate::planning::PlanSummary;
 
+/// The daemon's outcome of one run.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct DaemonOutcome {
+    #[serde(flatten)]
+    pub end: RunEnd,
+    #[serde(flatten)]
+    pub timing: LoopTiming,
+    #[serde(flatten)]
+    pub task: TaskRecord,
+    pub servo_trace: Vec<ServoTraceRow>,
+    pub wall_s: f64,
+}
+
+/// How the run ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunEnd {
     /// The daemon finished its task (grasped and lifted; the simulator judges the rest).
     pub success: bool,
     /// Furthest phase entered (`done` on success).
@@ -20,6 +38,11 @@ pub struct DaemonOutcome {
     /// What went wrong, typed: phase, kind, detail.
     pub failure: Option<handeye_wire::report::Failure>,
     pub servo_steps: u32,
+}
+
+/// How the hard loop kept time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoopTiming {
     /// Cycle time (frame received → command sent), µs.
     pub loop_us_p50: f64,
     pub loop_us_p99: f64,
@@ -29,6 +52,11 @@ pub struct DaemonOutcome {
     pub deadline_misses: u64,
     pub cycles: u64,
     pub robot_states: u64,
+}
+
+/// What the phases found and did.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TaskRecord {
     pub calibration: Option<CalibrationStats>,
     /// Where the target came from: `hint` or `plan` (`None`: never chosen).
     pub target_source: Option<TargetSource>,
@@ -43,41 +71,77 @@ pub struct DaemonOutcome {
     pub stop_frame_id: Option<u64>,
     /// Camera knocks the trackers recovered from.
     pub recoveries: u32,
-    pub servo_trace: Vec<ServoTraceRow>,
-    pub wall_s: f64,
 }
 
-impl DaemonOutcome {
-    pub fn from_loop(l: &HardLoop, wall_s: f64) -> Self {
-        let t = l.timing();
-        let us = |ns: u64| ns as f64 / 1000.0;
-        let phase = l.phase();
-        Self {
-            success: phase == handeye_wire::Phase::Done,
-            phase_reached: l.phase_reached().name().to_string(),
-            final_phase: phase.name().to_string(),
-            failure_reason: l.failure().map(str::to_string),
-            // Interim: the kind is not classified yet where the failure is raised.
-            failure: l.failure().map(|r| handeye_wire::report::Failure::new(l.phase_reached().name(), handeye_wire::report::FailureKind::Internal, r)),
-            servo_steps: l.mission.servo_steps,
-            loop_us_p50: us(t.percentile_ns(50.0)),
-            loop_us_p99: us(t.percentile_ns(99.0)),
-            loop_us_max: us(t.max_ns()),
-            loop_us_mean: t.mean_ns() / 1000.0,
-            deadline_us: t.deadline_ns() / 1000,
-            deadline_misses: t.deadline_misses(),
-            cycles: t.count(),
-            robot_states: l.robot_states(),
-            calibration: l.mission.calibration.as_ref().map(|c| c.stats),
-            target_source: l.mission.target.as_ref().map(|t| t.source),
-            plan: l.mission.plan.clone(),
-            planning: l.mission.planning,
-            target_attempts: l.mission.target_attempts,
-            grip_width_mm: l.mission.grip_width_m.map(|w| w * 1e3),
-            stop_frame_id: l.stopped_at_frame(),
-            recoveries: l.recoveries,
-            servo_trace: l.mission.servo_trace.clone(),
-            wall_s,
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_wire::report::{Failure, FailureKind};
+
+    fn outcome() -> DaemonOutcome {
+        DaemonOutcome {
+            end: RunEnd {
+                success: false,
+                phase_reached: "servo".into(),
+                final_phase: "failed".into(),
+                failure_reason: Some("servo: not converged after 90 s (60 steps)".into()),
+                failure: Some(Failure::new("servo", FailureKind::NotConverged, "servo: not converged after 90 s (60 steps)")),
+                servo_steps: 60,
+            },
+            timing: LoopTiming {
+                loop_us_p50: 40.0,
+                loop_us_p99: 90.0,
+                loop_us_max: 120.0,
+                loop_us_mean: 45.0,
+                deadline_us: 5000,
+                deadline_misses: 0,
+                cycles: 900,
+                robot_states: 1800,
+            },
+            task: TaskRecord {
+                calibration: None,
+                target_source: Some(TargetSource::Plan),
+                plan: None,
+                planning: None,
+                target_attempts: 1,
+                grip_width_mm: None,
+                stop_frame_id: Some(u64::MAX),
+                recoveries: 0,
+            },
+            servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
+            wall_s: 31.5,
         }
+    }
+
+    #[test]
+    fn daemon_json_is_one_flat_object_that_reads_back() {
+        let o = outcome();
+        let value = serde_json::to_value(&o).unwrap();
+        let keys: Vec<&str> = value.as_object().unwrap().keys().map(String::as_str).collect();
+        let mut expected = vec![
+            "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
+            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "calibration",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
+            "servo_trace", "wall_s",
+        ];
+        expected.sort_unstable();
+        let mut keys = keys;
+        keys.sort_unstable();
+        assert_eq!(keys, expected);
+        assert_eq!(value["failure"]["kind"], "not_converged");
+        let back: DaemonOutcome = serde_json::from_value(value).unwrap();
+        assert_eq!((back.end, back.timing), (o.end, o.timing));
+        assert_eq!((back.task.target_source, back.task.stop_frame_id), (o.task.target_source, o.task.stop_frame_id));
+        assert_eq!(back.servo_trace, o.servo_trace);
+    }
+
+    #[test]
+    fn a_renamed_key_is_an_error_that_names_it() {
+        let text = serde_json::to_string(&outcome()).unwrap().replace("\"phase_reached\"", "\"phase_reachd\"");
+        let err = serde_json::from_str::<DaemonOutcome>(&text).unwrap_err().to_string();
+        assert!(err.contains("phase_reached"), "{err}");
+        let text = serde_json::to_string(&outcome()).unwrap().replace("\"loop_us_p99\"", "\"loop_p99_us\"");
+        let err = serde_json::from_str::<DaemonOutcome>(&text).unwrap_err().to_string();
+        assert!(err.contains("loop_us_p99"), "{err}");
     }
 }

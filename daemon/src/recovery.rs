@@ -43,7 +43,20 @@ pub enum RecoveryStep {
     Searching,
     /// Both trackers of the view are back and steady.
     Recovered { shift_px: [f64; 2] },
-    Failed(String),
+    Failed(RecoveryError),
+}
+
+/// Why the trackers of the moved view were not re-acquired.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RecoveryError {
+    #[error("the other view lost its trackers too")]
+    OtherViewLost,
+    #[error("the re-acquired trackers did not hold")]
+    DidNotHold,
+    #[error("no gripper tracker")]
+    NoGripperTracker,
+    #[error("the plate was not found within ±{:.0} px (best confidence {best_score:.2})", MAX_SHIFT_PX)]
+    NotFound { best_score: f64 },
 }
 
 impl Recovery {
@@ -66,14 +79,14 @@ impl Recovery {
     /// One cycle on `image` (the moved view).
     pub fn step(&mut self, trackers: &mut StereoTrackerSet, image: &ImageView<'_>, other_tracking: bool) -> RecoveryStep {
         if !other_tracking {
-            return RecoveryStep::Failed("the other view lost its trackers too".into());
+            return RecoveryStep::Failed(RecoveryError::OtherViewLost);
         }
         if let Some(frames) = self.confirmed.as_mut() {
             let ok = [Role::Gripper, Role::Target].iter().all(|&r| {
                 trackers.get(r, self.view).is_some_and(|t| t.state().is_tracking() && t.confidence().score >= 0.6)
             });
             if !ok {
-                return RecoveryStep::Failed("the re-acquired trackers did not hold".into());
+                return RecoveryStep::Failed(RecoveryError::DidNotHold);
             }
             *frames += 1;
             // Halfway, refine the target's outline from its edges and restart it there: the
@@ -91,7 +104,7 @@ impl Recovery {
             return RecoveryStep::Searching;
         }
         let Some(base) = trackers.get(Role::Gripper, self.view).cloned() else {
-            return RecoveryStep::Failed("no gripper tracker".into());
+            return RecoveryStep::Failed(RecoveryError::NoGripperTracker);
         };
         let end = (self.next + CANDIDATES_PER_FRAME).min(self.candidates.len());
         for &d in &self.candidates[self.next..end] {
@@ -129,10 +142,7 @@ impl Recovery {
                 self.confirmed = Some(0);
                 RecoveryStep::Searching
             }
-            _ => RecoveryStep::Failed(format!(
-                "the plate was not found within ±{MAX_SHIFT_PX:.0} px (best confidence {:.2})",
-                self.best.map_or(0.0, |b| b.0)
-            )),
+            _ => RecoveryStep::Failed(RecoveryError::NotFound { best_score: self.best.map_or(0.0, |b| b.0) }),
         }
     }
 }
@@ -220,7 +230,10 @@ mod tests {
                 break;
             }
         }
-        assert!(matches!(&outcome, RecoveryStep::Failed(why) if why.contains("not found")), "{outcome:?}");
+        assert!(matches!(&outcome, RecoveryStep::Failed(RecoveryError::NotFound { .. })), "{outcome:?}");
+        if let RecoveryStep::Failed(why) = &outcome {
+            assert!(why.to_string().contains("not found"), "{why}");
+        }
         // And it gives up at once when the other view is lost too.
         let mut rec = Recovery::start(&set, View::Left, 0).unwrap();
         assert!(matches!(rec.step(&mut set, &blank.view(), false), RecoveryStep::Failed(_)));

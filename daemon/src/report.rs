@@ -12,7 +12,7 @@ use handeye_vision::image::{ImageBuf, ImageView};
 use handeye_wire::{Telemetry, TELEMETRY_TRACKERS};
 use image::{Rgb, RgbImage};
 
-use crate::phase::ServoTraceRow;
+use crate::mission::ServoTraceRow;
 use crate::worker::Worker;
 
 /// A moment worth a picture: both views and the trackers as telemetry reported them.

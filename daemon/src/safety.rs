@@ -1,43 +1,57 @@
 //! What stops the arm: a robot fault or a reading that makes no sense, a lost tracker in a
 //! phase that needs it. (A stale or vanished camera stream is caught by the transport loop,
-//! which knows the wall clock.) Each check returns the reason, worded for the operator.
+//! which knows the wall clock.) Each check returns the fault, worded for the operator.
 
 use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
+use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, Phase, RobotState};
 
 use crate::config::SafetyConfig;
-use crate::phase::needs_trackers;
+use crate::fault::Fault;
 
-/// Why the arm must stop, as text that fits the telemetry's reason (96 bytes).
-pub type StopReason = String;
+/// Which phases need which trackers tracking, `(gripper, target)` (a lost one stops the arm).
+pub fn needs_trackers(phase: Phase) -> (bool, bool) {
+    match phase {
+        // While the target trackers converge the arm holds still: acquire_target judges them
+        // itself at the end (and may try the plan's next grasp site instead).
+        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => (true, false),
+        Phase::Servo => (true, true),
+        _ => (false, false),
+    }
+}
+
+/// A reading that makes no sense.
+fn nonsense(detail: String) -> Fault {
+    Fault::new(FailureKind::RobotState, detail)
+}
 
 /// Checks one robot state reading against the previous one.
-pub fn check_robot(cfg: &SafetyConfig, previous: Option<&RobotState>, s: &RobotState) -> Result<(), StopReason> {
+pub fn check_robot(cfg: &SafetyConfig, previous: Option<&RobotState>, s: &RobotState) -> Result<(), Fault> {
     if s.flags & robot_flags::FAULT != 0 {
-        return Err(format!("robot fault (code {})", s.fault));
+        return Err(Fault::new(FailureKind::RobotFault, format!("robot fault (code {})", s.fault)));
     }
     if s.flags & robot_flags::WATCHDOG_STOP != 0 {
-        return Err("robot watchdog stopped the arm (commands arrived late)".into());
+        return Err(Fault::new(FailureKind::RobotFault, "robot watchdog stopped the arm (commands arrived late)"));
     }
     let p = s.tool_pos_m.map(f64::from);
     if (0..3).any(|i| !(p[i] >= cfg.workspace_min_m[i] && p[i] <= cfg.workspace_max_m[i])) {
-        return Err(format!("nonsense robot state: tool at ({:.3}, {:.3}, {:.3}) m, outside the workspace", p[0], p[1], p[2]));
+        return Err(nonsense(format!("nonsense robot state: tool at ({:.3}, {:.3}, {:.3}) m, outside the workspace", p[0], p[1], p[2])));
     }
     if let Some(prev) = previous {
         let q = prev.tool_pos_m.map(f64::from);
         let jump = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
         if jump > cfg.max_state_jump_m {
-            return Err(format!("nonsense robot state: tool jumped {:.0} mm between readings", jump * 1e3));
+            return Err(nonsense(format!("nonsense robot state: tool jumped {:.0} mm between readings", jump * 1e3)));
         }
         if s.seq <= prev.seq && s.time_ns < prev.time_ns {
-            return Err("nonsense robot state: sequence went backwards".into());
+            return Err(nonsense("nonsense robot state: sequence went backwards".into()));
         }
     }
     Ok(())
 }
 
 /// Checks the trackers a phase depends on.
-pub fn check_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Result<(), StopReason> {
+pub fn check_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Result<(), Fault> {
     let (gripper, target) = needs_trackers(phase);
     for (role, needed, name) in [(Role::Gripper, gripper, "gripper"), (Role::Target, target, "target")] {
         if !needed || !View::ALL.iter().all(|&v| trackers.is_active(role, v)) {
@@ -46,14 +60,14 @@ pub fn check_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, t
         for view in View::ALL {
             let side = if view == View::Left { "left" } else { "right" };
             match states.get(role, view) {
-                Some(TrackState::Lost(why)) => return Err(format!("{name} tracker lost ({side} view): {why}")),
-                None => return Err(format!("{name} tracker ({side} view) did not run")),
+                Some(TrackState::Lost(why)) => return Err(Fault::new(FailureKind::TrackerLost, format!("{name} tracker lost ({side} view): {why}"))),
+                None => return Err(Fault::new(FailureKind::TrackerLost, format!("{name} tracker ({side} view) did not run"))),
                 Some(TrackState::Tracking) => {}
             }
             let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
             let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
             if score.is_nan() || score < min {
-                return Err(format!("{name} tracker ({side} view) confidence {score:.2} < {min}"));
+                return Err(Fault::new(FailureKind::TrackerUnsure, format!("{name} tracker ({side} view) confidence {score:.2} < {min}")));
             }
         }
     }
@@ -75,13 +89,15 @@ mod tests {
         let ok = state([0.3, 0.0, 0.2]);
         assert_eq!(check_robot(&cfg, None, &ok), Ok(()));
         let fault = RobotState { flags: robot_flags::FAULT, fault: 7, ..ok };
-        assert!(check_robot(&cfg, None, &fault).unwrap_err().contains("fault"));
+        assert_eq!(check_robot(&cfg, None, &fault).unwrap_err(), Fault::new(FailureKind::RobotFault, "robot fault (code 7)"));
         let wd = RobotState { flags: robot_flags::WATCHDOG_STOP, ..ok };
-        assert!(check_robot(&cfg, None, &wd).unwrap_err().contains("watchdog"));
+        let err = check_robot(&cfg, None, &wd).unwrap_err();
+        assert!(err.kind == FailureKind::RobotFault && err.detail.contains("watchdog"), "{err:?}");
         let far = state([5.0, 0.0, 0.2]);
-        assert!(check_robot(&cfg, None, &far).unwrap_err().contains("outside the workspace"));
+        let err = check_robot(&cfg, None, &far).unwrap_err();
+        assert!(err.kind == FailureKind::RobotState && err.detail.contains("outside the workspace"), "{err:?}");
         let jumped = RobotState { seq: 2, time_ns: 20, ..state([0.3, 0.1, 0.2]) };
-        assert!(check_robot(&cfg, Some(&ok), &jumped).unwrap_err().contains("jumped 100 mm"));
+        assert!(check_robot(&cfg, Some(&ok), &jumped).unwrap_err().detail.contains("jumped 100 mm"));
         let moved = RobotState { seq: 2, time_ns: 20, ..state([0.301, 0.0, 0.2]) };
         assert_eq!(check_robot(&cfg, Some(&ok), &moved), Ok(()));
     }
@@ -109,7 +125,7 @@ mod tests {
         let blank = ImageBuf::filled(160, 120, 200);
         let states = set.update(&blank.view(), &blank.view(), 0.03);
         let err = check_trackers(&cfg, Phase::Servo, &states, &set).unwrap_err();
-        assert!(err.contains("tracker lost"), "{err}");
+        assert!(err.kind == FailureKind::TrackerLost && err.detail.contains("tracker lost"), "{err:?}");
         assert_eq!(check_trackers(&cfg, Phase::Grasp, &states, &set), Ok(()));
     }
 }

@@ -14,13 +14,15 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use handeye_vision::image::ImageView;
-use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
-use handeye_wire::stereo::{StereoEvent, StereoSubscriber};
+use handeye_wire::hint::OperatorHint;
+use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSendError, MessageSubscriber, MessageWaitError};
+use handeye_wire::report::FailureKind;
+use handeye_wire::stereo::{StereoEvent, StereoSubscriber, StereoWaitError};
 use handeye_wire::{monotonic_ns, Domain, RobotCommand, RobotState, Telemetry, WireNode};
 
 use crate::config::DaemonConfig;
+use crate::fault::Fault;
 use crate::hard_loop::HardLoop;
-use handeye_wire::hint::OperatorHint;
 use crate::outcome::DaemonOutcome;
 use crate::report::{ReportJob, ReportWriter, Snapshot};
 
@@ -33,9 +35,11 @@ pub enum ServiceError {
     #[error(transparent)]
     Message(#[from] handeye_wire::message::MessagePortError),
     #[error("waiting for frames: {0}")]
-    Wait(String),
+    WaitFrames(#[source] StereoWaitError),
+    #[error("waiting for frames: {0}")]
+    WaitStates(#[source] MessageWaitError),
     #[error("publishing: {0}")]
-    Send(String),
+    Send(#[from] MessageSendError),
     #[error("starting a thread: {0}")]
     Thread(#[from] std::io::Error),
     #[error("no stereo frame arrived within {0:.0} s of start-up")]
@@ -75,53 +79,52 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     hl.set_indicated_point(options.indicated_point_m);
     let mut got_frame = false;
     let send = |commands: &mut MessagePublisher<RobotCommand>, telemetry: &mut MessagePublisher<Telemetry>, cmd: &RobotCommand, t: &Telemetry| {
-        telemetry.send(t).map_err(|e| ServiceError::Send(e.to_string()))?;
-        commands.send(cmd).map_err(|e| ServiceError::Send(e.to_string()))?;
+        telemetry.send(t)?;
+        commands.send(cmd)?;
         Ok::<(), ServiceError>(())
     };
-    let mut stop_reason: Option<String> = None;
+    let mut stop_reason: Option<Fault> = None;
+    let camera = |detail: &str| Some(Fault::new(FailureKind::Camera, detail));
     loop {
         let timeout = if got_frame { stale } else { start_timeout.saturating_sub(start.elapsed()).max(Duration::from_millis(1)) };
-        let event = frames.wait(timeout).map_err(|e| ServiceError::Wait(e.to_string()))?;
+        let event = frames.wait(timeout).map_err(ServiceError::WaitFrames)?;
         match event {
             StereoEvent::Frame(frame) => {
                 got_frame = true;
                 let receive_ns = frame.receive_time_ns();
                 let layout = *frame.layout();
                 let (Some(l), Some(r)) = (frame.camera(0), frame.camera(1)) else {
-                    stop_reason = Some("camera stream has fewer than two views".into());
+                    stop_reason = camera("camera stream has fewer than two views");
                     break;
                 };
                 let (Ok(left), Ok(right)) = (
                     ImageView::new(l, layout.width, layout.height, layout.stride),
                     ImageView::new(r, layout.width, layout.height, layout.stride),
                 ) else {
-                    stop_reason = Some("camera frames are not GRAY8 views".into());
+                    stop_reason = camera("camera frames are not GRAY8 views");
                     break;
                 };
                 loop {
-                    match states.wait(Duration::ZERO).map_err(|e| ServiceError::Wait(e.to_string()))? {
+                    match states.wait(Duration::ZERO).map_err(ServiceError::WaitStates)? {
                         MessageEvent::Message(s) => hl.robot_state(&s),
                         MessageEvent::PublisherGone => {
-                            hl.safety_stop("robot state publisher gone");
+                            hl.safety_stop(Fault::new(FailureKind::RobotState, "robot state publisher gone"));
                         }
                         MessageEvent::Timeout | MessageEvent::PublisherUp => break,
                         MessageEvent::Interrupted => break,
                     }
                 }
-                let cmd = *hl.cycle(frame.frame_id(), &left, &right);
+                let out = hl.cycle(frame.frame_id(), &left, &right);
                 let loop_ns = monotonic_ns().saturating_sub(receive_ns);
                 let t = *hl.finish_cycle(loop_ns);
-                send(&mut commands, &mut telemetry, &cmd, &t)?;
-                if let Some(label) = hl.mission.snapshot.take()
-                    && let Some(rep) = report.as_mut()
-                {
-                    rep.submit(ReportJob::Overlay(Box::new(Snapshot::take(label, &left, &right, &t))));
-                }
-                if let Some(plan) = hl.mission.plan_report.take()
-                    && let Some(rep) = report.as_mut()
-                {
-                    rep.submit(ReportJob::Plan(plan));
+                send(&mut commands, &mut telemetry, &out.command, &t)?;
+                if let Some(rep) = report.as_mut() {
+                    if let Some(label) = out.reports.snapshot {
+                        rep.submit(ReportJob::Overlay(Box::new(Snapshot::take(label, &left, &right, &t))));
+                    }
+                    if let Some(plan) = out.reports.plan {
+                        rep.submit(ReportJob::Plan(plan));
+                    }
                 }
                 drop(frame);
                 if hl.finished() {
@@ -132,29 +135,29 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                 if !got_frame {
                     return Err(ServiceError::NoFrames(start_timeout.as_secs_f64()));
                 }
-                stop_reason = Some(format!("no camera frame for {} ms", stale.as_millis()));
+                stop_reason = Some(Fault::new(FailureKind::Camera, format!("no camera frame for {} ms", stale.as_millis())));
                 break;
             }
             StereoEvent::PublisherGone => {
                 if hl.phase() == handeye_wire::Phase::Done {
                     break;
                 }
-                stop_reason = Some("camera stream gone".into());
+                stop_reason = camera("camera stream gone");
                 break;
             }
             StereoEvent::PublisherUp => {}
             StereoEvent::Interrupted => {
-                stop_reason = Some("interrupted".into());
+                stop_reason = Some(Fault::new(FailureKind::Interrupted, "interrupted"));
                 break;
             }
         }
     }
     if let Some(reason) = stop_reason {
         let done = hl.phase() == handeye_wire::Phase::Done;
-        let (cmd, t) = hl.safety_stop(&reason);
         if !done {
             tracing::warn!(%reason, "stopping the arm");
         }
+        let (cmd, t) = hl.safety_stop(reason);
         // The robot may be gone too; a failed send changes nothing about the outcome.
         let _ = send(&mut commands, &mut telemetry, &cmd, &t);
     }
@@ -163,8 +166,8 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
         Some(mut rep) => {
             rep.submit(ReportJob::ServoPlot {
                 rows: outcome.servo_trace.clone(),
-                tolerance_mm: hl.mission.cfg.servo.converged_m * 1e3,
-                tolerance_deg: hl.mission.cfg.servo.converged_deg,
+                tolerance_mm: hl.config().servo.converged_m * 1e3,
+                tolerance_deg: hl.config().servo.converged_deg,
             });
             rep.finish()
         }

@@ -8,7 +8,7 @@
 
 use plotters::prelude::*;
 
-use crate::phase::ServoTraceRow;
+use crate::mission::ServoTraceRow;
 
 /// Smallest value shown: anything smaller (a converged step's zero) sits on the bottom edge.
 const FLOOR: f64 = 1e-3;
@@ -27,7 +27,7 @@ fn series(rows: &[ServoTraceRow], value: impl Fn(&ServoTraceRow) -> f64) -> Vec<
 /// convergence tolerances (`servo.converged_m`, `servo.converged_deg`).
 ///
 /// ```
-/// use handeye_daemon::phase::ServoTraceRow;
+/// use handeye_daemon::mission::ServoTraceRow;
 /// let rows: Vec<ServoTraceRow> = (1..6)
 ///     .map(|i| ServoTraceRow { step: i, frame: 0, error: [0.0; 6], offset_m: 0.02 / f64::from(i * i), offset_yaw_rad: 0.05 / f64::from(i) })
 ///     .collect();

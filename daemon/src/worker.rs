@@ -57,6 +57,12 @@ impl<J: Send + 'static, R: Send + 'static> Worker<J, R> {
         }
     }
 
+    /// Whether [`Self::try_submit`] would find room in the queue now: a caller that cannot
+    /// rebuild its job checks first instead of losing it to a refusal.
+    pub fn has_room(&self) -> bool {
+        self.jobs.as_ref().is_some_and(|tx| !tx.is_full())
+    }
+
     /// The next finished result, if any, without waiting.
     pub fn try_result(&mut self) -> Option<R> {
         match self.results.try_recv() {

@@ -101,17 +101,17 @@ pub fn run(args: DaemonArgs) -> Result<()> {
     } else {
         println!(
             "daemon: {} (reached {}){}; {} servo steps; loop p50 {:.0} µs, p99 {:.0} µs, {} deadline misses in {} cycles",
-            o.final_phase,
-            o.phase_reached,
-            o.failure_reason.as_ref().map(|r| format!(": {r}")).unwrap_or_default(),
-            o.servo_steps,
-            o.loop_us_p50,
-            o.loop_us_p99,
-            o.deadline_misses,
-            o.cycles
+            o.end.final_phase,
+            o.end.phase_reached,
+            o.end.failure_reason.as_ref().map(|r| format!(": {r}")).unwrap_or_default(),
+            o.end.servo_steps,
+            o.timing.loop_us_p50,
+            o.timing.loop_us_p99,
+            o.timing.deadline_misses,
+            o.timing.cycles
         );
     }
-    if !o.success {
+    if !o.end.success {
         std::process::exit(2);
     }
     Ok(())

@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use handeye_daemon::phase::TargetSource;
+use handeye_daemon::mission::TargetSource;
 use handeye_wire::report::required;
 use handeye_wire::report::{Failure, FailureKind};
 use serde::de::DeserializeOwned;

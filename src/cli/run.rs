@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use handeye_daemon::phase::TargetSource;
+use handeye_daemon::mission::TargetSource;
 use handeye_daemon::{DaemonConfig, DaemonOutcome};
 use handeye_sim::Scenario;
 use handeye_sim::referee::judge::Verdict;
@@ -336,16 +336,16 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     let targeted = watch.and_then(|w| w.targeted.as_ref());
     let converged = watch.and_then(|w| w.converged.as_ref());
     let grasped = watch.and_then(|w| w.grasped.as_ref());
-    let plan = d.as_ref().and_then(|d| d.plan.as_ref());
-    let planning = d.as_ref().and_then(|d| d.planning.as_ref());
+    let plan = d.as_ref().and_then(|d| d.task.plan.as_ref());
+    let planning = d.as_ref().and_then(|d| d.task.planning.as_ref());
     let summary = RunSummary {
         scenario: scenario.name.clone(),
         success,
-        phase_reached: d.as_ref().map(|d| d.phase_reached.clone()),
-        final_phase: d.as_ref().map(|d| d.final_phase.clone()),
+        phase_reached: d.as_ref().map(|d| d.end.phase_reached.clone()),
+        final_phase: d.as_ref().map(|d| d.end.final_phase.clone()),
         failure_reason: failure.as_ref().map(|f| f.detail.clone()),
         failure,
-        target_source: d.as_ref().and_then(|d| d.target_source),
+        target_source: d.as_ref().and_then(|d| d.task.target_source),
         target_block: v.as_ref().map(|v| v.target.clone()),
         targeted_block: targeted.map(|t| t.block.clone()),
         targeted_face: targeted.map(|t| t.face.clone()),
@@ -357,16 +357,16 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         planning_frames: planning.map(|p| p.frames),
         gripper_updates_while_planning: planning.map(|p| p.gripper_updates),
         gripper_update_rate_hz: watch.map(|w| w.plan.gripper_update_rate_hz),
-        servo_steps: d.as_ref().map(|d| d.servo_steps),
+        servo_steps: d.as_ref().map(|d| d.end.servo_steps),
         final_plane_error_mm: converged.map(|c| c.final_plane_error_mm),
         final_angle_error_deg: converged.map(|c| c.final_angle_error_deg),
         grasp_plane_error_mm: grasped.map(|g| g.jaw_plane_offset_mm.abs()),
         grasp_lateral_error_mm: grasped.map(|g| g.lateral_error_mm),
-        loop_us_p50: d.as_ref().map(|d| d.loop_us_p50),
-        loop_us_p99: d.as_ref().map(|d| d.loop_us_p99),
-        loop_us_max: d.as_ref().map(|d| d.loop_us_max),
-        deadline_misses: d.as_ref().map(|d| d.deadline_misses),
-        calibration_residual_px: d.as_ref().and_then(|d| d.calibration.as_ref()).map(|c| c.residual_rms_px),
+        loop_us_p50: d.as_ref().map(|d| d.timing.loop_us_p50),
+        loop_us_p99: d.as_ref().map(|d| d.timing.loop_us_p99),
+        loop_us_max: d.as_ref().map(|d| d.timing.loop_us_max),
+        deadline_misses: d.as_ref().map(|d| d.timing.deadline_misses),
+        calibration_residual_px: d.as_ref().and_then(|d| d.task.calibration.as_ref()).map(|c| c.residual_rms_px),
         max_lift_mm: v.as_ref().map(|v| v.max_lift_mm),
         sim_frames: v.as_ref().map(|v| v.frames),
         sim_time_s: v.as_ref().map(|v| v.sim_time_s),
@@ -389,12 +389,12 @@ fn read_if_written<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option
 /// (`note`: it was interrupted or ran out of wall time), else the simulator's judgement.
 /// The phase is the daemon's furthest one (`run` when it reported nothing).
 fn failure(d: Option<&DaemonOutcome>, v: Option<&SimReport>, note: Option<String>, dir: &Path) -> Failure {
-    let phase = d.map_or("run", |d| d.phase_reached.as_str());
+    let phase = d.map_or("run", |d| d.end.phase_reached.as_str());
     if let Some(d) = d {
-        if let Some(f) = &d.failure {
+        if let Some(f) = &d.end.failure {
             return f.clone();
         }
-        if let Some(r) = &d.failure_reason {
+        if let Some(r) = &d.end.failure_reason {
             return Failure::new(phase, FailureKind::Internal, r.clone());
         }
     }

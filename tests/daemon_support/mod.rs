@@ -62,7 +62,7 @@ impl InProcess {
         let daemon = &mut self.daemon;
         let mut cmd = RobotCommand::default();
         inside(&mut || {
-            cmd = *daemon.cycle(frame, &left, &right);
+            cmd = daemon.cycle(frame, &left, &right).command;
             daemon.finish_cycle(1);
         });
         let t = *self.daemon.telemetry();

@@ -125,6 +125,29 @@ impl RejectReason {
             _ => return None,
         })
     }
+
+    /// The reason in words, for a failure's detail (`None`: the controller gave no reason).
+    pub fn text(self) -> &'static str {
+        match self {
+            Self::Unreachable => "unreachable",
+            Self::JointLimit => "joint limit",
+            Self::Malformed => "malformed",
+            Self::Faulted => "robot faulted",
+            Self::None => "refused",
+        }
+    }
+
+    /// The words for a raw [`RobotState::reject`] code; "refused" for a code this version
+    /// does not know.
+    ///
+    /// ```
+    /// use handeye_wire::RejectReason;
+    /// assert_eq!(RejectReason::text_of(2), "joint limit");
+    /// assert_eq!(RejectReason::text_of(99), "refused");
+    /// ```
+    pub fn text_of(raw: u32) -> &'static str {
+        Self::from_u32(raw).map_or("refused", Self::text)
+    }
 }
 
 /// Number of arm joints reported in [`RobotState::joints_rad`].

@@ -6,22 +6,61 @@
 //! Copying the two frame pairs and the location itself allocate; they happen once, and the
 //! location runs on the worker thread while the loop keeps answering frames.
 
+use std::fmt;
+
 use handeye_vision::image::ImageBuf;
-use handeye_vision::locate::{locate_moving, LocateConfig};
+use handeye_vision::locate::{locate_moving, LocateConfig, LocateError};
 use handeye_vision::tracker::{ContourTracker, Role, View};
+use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, GripperCommand};
 
-use super::{timed_out, Cmd, Cycle, Job, JobResult, Mission, Step};
-use crate::gripper::find_plate;
+use super::job::PendingJob;
+use super::step::{timed_out, Cmd, Cycle, Step};
+use crate::gripper::{find_plate, PlateError};
+use crate::mission::Mission;
 
-#[derive(Debug)]
+/// The plate's corners in both views (left, right), image pixels.
+pub type PlateCorners = [[[f64; 2]; 4]; 2];
+
+/// Why the worker did not locate the plate.
+#[derive(Debug, thiserror::Error)]
+pub enum LocatePlatesError {
+    #[error("{view} view: {source}")]
+    Motion { view: &'static str, source: LocateError },
+    #[error("{view} view: {source}")]
+    Plate { view: &'static str, source: PlateError },
+}
+
 enum Stage {
     /// Jaws opening (or open), waiting for them and the arm to be still.
     Open { still: u32 },
     Close { sent_frame: Option<u64>, still: u32 },
-    /// Location running on the worker; the jaws reopen meanwhile.
-    Locating { submitted: Option<u64>, result: Option<Box<JobResult>> },
+    /// Location running on the worker (once submitted); the jaws reopen meanwhile.
+    Locating { job: Option<PendingJob<Result<PlateCorners, LocatePlatesError>>> },
     Converging { frames: u32 },
+}
+
+/// The stage as the time-out's failure names it (the wording of the stage's fields stays
+/// that of the submitted frame and the result).
+impl fmt::Debug for Stage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        /// The result as the failure text shows it.
+        struct Plate<'a>(Result<&'a PlateCorners, String>);
+        impl fmt::Debug for Plate<'_> {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.debug_tuple("Plate").field(&self.0).finish()
+            }
+        }
+        match self {
+            Self::Open { still } => f.debug_struct("Open").field("still", still).finish(),
+            Self::Close { sent_frame, still } => f.debug_struct("Close").field("sent_frame", sent_frame).field("still", still).finish(),
+            Self::Locating { job } => {
+                let result = job.as_ref().and_then(PendingJob::collected).map(|r| Plate(r.as_ref().map_err(ToString::to_string)));
+                f.debug_struct("Locating").field("submitted", &job.as_ref().map(PendingJob::submitted_frame)).field("result", &result).finish()
+            }
+            Self::Converging { frames } => f.debug_struct("Converging").field("frames", frames).finish(),
+        }
+    }
 }
 
 pub struct AcquireGripper {
@@ -47,7 +86,7 @@ impl AcquireGripper {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.acquire.timeout_s) {
-            return Step::Fail(format!("acquire_gripper: timed out after {} s in stage {:?}", m.cfg.acquire.timeout_s, self.stage));
+            return Step::fail(FailureKind::TimedOut, format!("acquire_gripper: timed out after {} s in stage {:?}", m.cfg.acquire.timeout_s, self.stage));
         }
         let settle = m.cfg.acquire.settle_frames;
         let patience = m.cfg.frames(1.0);
@@ -59,7 +98,7 @@ impl AcquireGripper {
                     // Allocates once: the open pair, kept for the difference.
                     self.open = Some([c.left.to_owned(), c.right.to_owned()]);
                     self.stage = Stage::Close { sent_frame: None, still: 0 };
-                    m.set_status("acquire gripper: jaws open, closing");
+                    m.reporting.set_status("acquire gripper: jaws open, closing");
                 }
                 Step::Stay(Cmd::gripper(GripperCommand::Open))
             }
@@ -71,54 +110,45 @@ impl AcquireGripper {
                 *n = if still(c, true, c.frame_index - sent, patience) { *n + 1 } else { 0 };
                 if *n > settle {
                     self.closed = Some([c.left.to_owned(), c.right.to_owned()]);
-                    self.stage = Stage::Locating { submitted: None, result: None };
-                    m.set_status("acquire gripper: locating the moving fingers");
+                    self.stage = Stage::Locating { job: None };
+                    m.reporting.set_status("acquire gripper: locating the moving fingers");
                     return Step::Stay(Cmd::gripper(GripperCommand::Open));
                 }
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Locating { submitted, result } => {
-                if submitted.is_none() {
-                    if let (Some(open), Some(closed)) = (self.open.take(), self.closed.take()) {
-                        match m.worker.try_submit(Job::LocateGripper { open, closed }) {
-                            Ok(()) => *submitted = Some(c.frame_index),
-                            Err(Job::LocateGripper { open, closed }) => {
-                                self.open = Some(open);
-                                self.closed = Some(closed);
-                            }
-                            Err(_) => {}
-                        }
+            Stage::Locating { job } => {
+                let Some(job) = job else {
+                    // A refused job would lose the frames: submit only when there is room.
+                    if m.worker.has_room()
+                        && let (Some(open), Some(closed)) = (self.open.take(), self.closed.take())
+                    {
+                        *job = PendingJob::submit(&mut m.worker, c.frame_index, move || locate_plates(&open, &closed));
                     }
                     return Step::Stay(Cmd::HOLD);
-                }
-                if result.is_none() {
-                    *result = m.worker.try_result().map(Box::new);
-                }
-                if submitted.is_some_and(|f| c.frame_index < f + super::WORKER_DELAY_FRAMES) {
-                    return Step::Stay(Cmd::HOLD);
-                }
-                match result.take().map(|r| *r) {
+                };
+                // Taken off the worker as soon as it is done, handed out when due.
+                job.collect(&mut m.worker);
+                match job.poll(&mut m.worker, c.frame_index) {
                     None => Step::Stay(Cmd::HOLD),
-                    Some(JobResult::Plate(Ok(plates))) => {
+                    Some(Ok(plates)) => {
                         for (view, corners) in [View::Left, View::Right].into_iter().zip(plates) {
                             match ContourTracker::new(m.cfg.plate_tracker_config(), &corners) {
                                 Ok(t) => {
                                     m.trackers.insert(Role::Gripper, view, t);
                                 }
-                                Err(e) => return Step::Fail(format!("acquire_gripper: plate tracker: {e}")),
+                                Err(e) => return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate tracker: {e}")),
                             }
                         }
                         self.stage = Stage::Converging { frames: 0 };
-                        m.set_status("acquire gripper: plate trackers converging");
+                        m.reporting.set_status("acquire gripper: plate trackers converging");
                         Step::Stay(Cmd::HOLD)
                     }
-                    Some(JobResult::Plate(Err(e))) => Step::Fail(format!("acquire_gripper: {e}")),
-                    Some(_) => Step::Fail("acquire_gripper: unexpected worker result".into()),
+                    Some(Err(e)) => Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: {e}")),
                 }
             }
             Stage::Converging { frames } => {
                 if !c.states.pair_tracking(Role::Gripper) {
-                    return Step::Fail("acquire_gripper: a plate tracker was lost while converging".into());
+                    return Step::fail(FailureKind::TrackerLost, "acquire_gripper: a plate tracker was lost while converging");
                 }
                 *frames += 1;
                 // Refine the found corners from the plate's edges, twice (see
@@ -138,23 +168,23 @@ impl AcquireGripper {
                 // Verify: both confident, big enough, and of similar size in both views.
                 let mut areas = [0.0; 2];
                 for (i, view) in [View::Left, View::Right].into_iter().enumerate() {
-                    let Some(t) = m.trackers.get(Role::Gripper, view) else { return Step::Fail("acquire_gripper: tracker missing".into()) };
+                    let Some(t) = m.trackers.get(Role::Gripper, view) else { return Step::fail(FailureKind::Internal, "acquire_gripper: tracker missing") };
                     let score = t.confidence().score;
                     if score < m.cfg.acquire.min_score {
-                        return Step::Fail(format!("acquire_gripper: plate tracker ({view:?}) confidence {score:.2} < {}", m.cfg.acquire.min_score));
+                        return Step::fail(FailureKind::TrackerUnsure, format!("acquire_gripper: plate tracker ({view:?}) confidence {score:.2} < {}", m.cfg.acquire.min_score));
                     }
                     let corners: Vec<_> = t.corners().collect();
                     areas[i] = polygon_area(corners.iter().map(|p| [p.x, p.y]));
                     if areas[i] < m.cfg.acquire.min_plate_area_px2 {
-                        return Step::Fail(format!("acquire_gripper: plate ({view:?}) only {:.0} px²", areas[i]));
+                        return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate ({view:?}) only {:.0} px²", areas[i]));
                     }
                 }
                 let ratio = areas[0].max(areas[1]) / areas[0].min(areas[1]);
                 if ratio > 1.6 {
-                    return Step::Fail(format!("acquire_gripper: plate areas differ between views ({:.0} vs {:.0} px²)", areas[0], areas[1]));
+                    return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate areas differ between views ({:.0} vs {:.0} px²)", areas[0], areas[1]));
                 }
-                m.snapshot = Some("gripper_acquired");
-                m.set_status("gripper acquired");
+                m.reporting.snapshot("gripper_acquired");
+                m.reporting.set_status("gripper acquired");
                 Step::Next(Cmd::HOLD)
             }
         }
@@ -169,13 +199,34 @@ pub fn polygon_area(points: impl Iterator<Item = [f64; 2]>) -> f64 {
 }
 
 /// Worker job: the plate's corners in both views from the open and closed pairs.
-pub fn locate_plates(open: &[ImageBuf; 2], closed: &[ImageBuf; 2]) -> Result<[[[f64; 2]; 4]; 2], String> {
+pub fn locate_plates(open: &[ImageBuf; 2], closed: &[ImageBuf; 2]) -> Result<PlateCorners, LocatePlatesError> {
     let mut out = [[[0.0; 2]; 4]; 2];
     for v in 0..2 {
-        let name = ["left", "right"][v];
+        let view = ["left", "right"][v];
         let motion = locate_moving(&open[v].view(), &closed[v].view(), &LocateConfig::default())
-            .map_err(|e| format!("{name} view: {e}"))?;
-        out[v] = find_plate(&open[v].view(), &motion).map_err(|e| format!("{name} view: {e}"))?;
+            .map_err(|source| LocatePlatesError::Motion { view, source })?;
+        out[v] = find_plate(&open[v].view(), &motion).map_err(|source| LocatePlatesError::Plate { view, source })?;
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_time_out_names_the_stage_as_before() {
+        assert_eq!(format!("{:?}", Stage::Locating { job: None }), "Locating { submitted: None, result: None }");
+        assert_eq!(format!("{:?}", Stage::Close { sent_frame: Some(4), still: 2 }), "Close { sent_frame: Some(4), still: 2 }");
+        let mut worker = crate::phase::job::spawn_worker().unwrap();
+        let mut job = PendingJob::submit(&mut worker, 7, || Err(LocatePlatesError::Plate { view: "left", source: PlateError::NoMotion }));
+        while job.as_ref().is_some_and(|j| j.collected().is_none()) {
+            job.as_mut().unwrap().collect(&mut worker);
+            std::thread::yield_now();
+        }
+        assert_eq!(
+            format!("{:?}", Stage::Locating { job }),
+            r#"Locating { submitted: Some(7), result: Some(Plate(Err("left view: nothing moved"))) }"#
+        );
+    }
 }

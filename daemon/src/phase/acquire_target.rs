@@ -7,8 +7,10 @@
 //! follows the facet.
 
 use handeye_vision::tracker::{ContourTracker, Role, View};
+use handeye_wire::report::FailureKind;
 
-use super::{timed_out, Cmd, Cycle, Mission, Step};
+use super::step::{timed_out, Cmd, Cycle, Step};
+use crate::mission::{Mission, TargetSource};
 
 pub struct AcquireTarget {
     start_frame: u64,
@@ -23,19 +25,19 @@ impl AcquireTarget {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.target.timeout_s) {
-            return Step::Fail(format!("acquire_target: timed out after {} s", m.cfg.target.timeout_s));
+            return Step::fail(FailureKind::TimedOut, format!("acquire_target: timed out after {} s", m.cfg.target.timeout_s));
         }
         if !self.started {
             self.started = true;
-            m.target_attempts += 1;
-            let Some(hint) = m.target.as_ref() else {
-                return Step::Fail("acquire_target: no target (no operator hint and no plan)".into());
+            m.targeting.begin_attempt();
+            let Some(hint) = m.targeting.target() else {
+                return Step::fail(FailureKind::Internal, "acquire_target: no target (no operator hint and no plan)");
             };
             let what = match hint.source {
-                super::TargetSource::Hint => "the hint's corners",
-                super::TargetSource::Plan => "the planned facet's corners",
+                TargetSource::Hint => "the hint's corners",
+                TargetSource::Plan => "the planned facet's corners",
             };
-            let Some(cal) = m.calibration.as_ref() else { return Step::Fail("acquire_target: not calibrated".into()) };
+            let Some(cal) = m.calibration.get() else { return Step::fail(FailureKind::Internal, "acquire_target: not calibrated") };
             let n = hint.left_px.len();
             let rms = (hint
                 .left_px
@@ -46,14 +48,14 @@ impl AcquireTarget {
                 / n as f64)
                 .sqrt();
             if rms > m.cfg.target.max_epipolar_px {
-                return Step::Fail(format!(
+                return Step::fail(FailureKind::TargetNotAcquired, format!(
                     "acquire_target: {what} break the epipolar constraint ({rms:.1} px RMS > {} px): not the same facet in both views?",
                     m.cfg.target.max_epipolar_px
                 ));
             }
             let max_depth = m.cfg.gripper.max_opening_m;
             if hint.depth_m >= max_depth {
-                return Step::Fail(format!(
+                return Step::fail(FailureKind::TargetNotAcquired, format!(
                     "acquire_target: the target is {:.0} mm deep, wider than the jaws open ({:.0} mm)",
                     hint.depth_m * 1e3,
                     max_depth * 1e3
@@ -64,10 +66,10 @@ impl AcquireTarget {
                     Ok(t) => {
                         m.trackers.insert(Role::Target, view, t);
                     }
-                    Err(e) => return Step::Fail(format!("acquire_target: target polygon ({view:?}): {e}")),
+                    Err(e) => return Step::fail(FailureKind::TargetNotAcquired, format!("acquire_target: target polygon ({view:?}): {e}")),
                 }
             }
-            m.set_status("acquire target: trackers on the target facet converging");
+            m.reporting.set_status("acquire target: trackers on the target facet converging");
             return Step::Stay(Cmd::HOLD);
         }
         self.frames += 1;
@@ -86,30 +88,30 @@ impl AcquireTarget {
             return Step::Stay(Cmd::HOLD);
         }
         for view in View::ALL {
-            let Some(t) = m.trackers.get(Role::Target, view) else { return Step::Fail("acquire_target: tracker missing".into()) };
+            let Some(t) = m.trackers.get(Role::Target, view) else { return Step::fail(FailureKind::Internal, "acquire_target: tracker missing") };
             let score = t.confidence().score;
             // The servo will need the safety's score; the arm is still until then, so a shaky
             // tracker is judged here, at the end, rather than stopping the run on its way in.
             let min = m.cfg.target.min_score.max(m.cfg.safety.min_target_score);
             if score.is_nan() || score < min {
-                return Step::Fail(format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {min}"));
+                return Step::fail(FailureKind::TrackerUnsure, format!("acquire_target: target tracker ({view:?}) confidence {score:.2} < {min}"));
             }
         }
         // The planned site, in each tracker's template coordinates.
-        if let Some(site_px) = m.target.as_ref().and_then(|t| t.site_px) {
+        if let Some(site_px) = m.targeting.target().and_then(|t| t.site_px) {
             let mut st = [[0.0; 2]; 2];
             for (k, view) in View::ALL.into_iter().enumerate() {
                 let Some(p) = m.trackers.get(Role::Target, view).and_then(|t| t.template_from_image(nalgebra::Vector2::new(site_px[k][0], site_px[k][1]))) else {
-                    return Step::Fail("acquire_target: the grasp site has no place in the target tracker's frame".into());
+                    return Step::fail(FailureKind::TargetNotAcquired, "acquire_target: the grasp site has no place in the target tracker's frame");
                 };
                 st[k] = [p.x, p.y];
             }
-            if let Some(t) = m.target.as_mut() {
+            if let Some(t) = m.targeting.target_mut() {
                 t.site_template = Some(st);
             }
         }
-        m.snapshot = Some("target_acquired");
-        m.set_status("target acquired");
+        m.reporting.snapshot("target_acquired");
+        m.reporting.set_status("target acquired");
         Step::Next(Cmd::HOLD)
     }
 }

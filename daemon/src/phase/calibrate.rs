@@ -6,21 +6,51 @@
 //! disparity limits taken from the cage. A fit with residuals over the configured limits is
 //! refused: the run fails with the numbers.
 
-use handeye_vision::affine::{AffineStereo, EpipolarConstraint};
+use std::fmt;
+
+use handeye_vision::affine::{AffineStereo, EpipolarConstraint, FitError};
 use handeye_vision::servo::ServoModel;
 use handeye_vision::tracker::{Role, View};
+use handeye_wire::report::FailureKind;
+use handeye_wire::RejectReason;
 use nalgebra::Vector3;
 
-use super::{reject_text, timed_out, Calibration, CalibrationStats, Cmd, Cycle, Job, JobResult, Mission, MovePoll, MoveWait, Step};
+use super::job::PendingJob;
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use crate::mission::{Calibration, CalibrationStats, Mission};
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What the worker fits: the affine model, the epipolar constraint and its RMS residual, px.
+pub type Fitted = (AffineStereo, EpipolarConstraint, f64);
+
+/// Why the worker's fit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationFitError {
+    #[error("affine fit: {0}")]
+    Affine(#[source] FitError),
+    #[error("epipolar fit: {0}")]
+    Epipolar(#[source] FitError),
+}
+
 enum Stage {
     /// Moving to cage point `i`.
     Moving { i: usize, wait: Option<MoveWait> },
     /// Averaging samples at point `i`.
     Sampling { i: usize, n: u32 },
-    /// Fit submitted; the arm moves back.
-    Fitting { wait: Option<MoveWait>, submitted: Option<u64> },
+    /// Fit submitted (once the worker took it); the arm moves back.
+    Fitting { wait: Option<MoveWait>, job: Option<PendingJob<Result<Fitted, CalibrationFitError>>> },
+}
+
+/// The stage as the time-out's failure names it (the fit job by the frame it was submitted).
+impl fmt::Debug for Stage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Moving { i, wait } => f.debug_struct("Moving").field("i", i).field("wait", wait).finish(),
+            Self::Sampling { i, n } => f.debug_struct("Sampling").field("i", i).field("n", n).finish(),
+            Self::Fitting { wait, job } => {
+                f.debug_struct("Fitting").field("wait", wait).field("submitted", &job.as_ref().map(PendingJob::submitted_frame)).finish()
+            }
+        }
+    }
 }
 
 /// The calibration settings a cycle needs, copied (no allocation).
@@ -58,7 +88,7 @@ pub struct Calibrate {
     image_px: Vec<[f64; 4]>,
     acc_w: [f64; 4],
     acc_x: [f64; 3],
-    fitted: Option<(AffineStereo, EpipolarConstraint, f64)>,
+    fitted: Option<Fitted>,
     arrived_back: bool,
 }
 
@@ -84,7 +114,7 @@ impl Calibrate {
         let points = cfg.points;
         let limit = cfg.point_timeout_s * (points as f64 + 2.0);
         if timed_out(&m.cfg, self.start_frame, c.frame_index, limit) {
-            return Step::Fail(format!("calibrate: timed out after {limit:.0} s at {:?}", self.stage));
+            return Step::fail(FailureKind::TimedOut, format!("calibrate: timed out after {limit:.0} s at {:?}", self.stage));
         }
         if self.yaw_rad.is_nan() {
             self.yaw_rad = f64::from(c.robot.tool_yaw_rad);
@@ -95,16 +125,19 @@ impl Calibrate {
                 let Some(w) = wait else {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
                     self.stage_frame = c.frame_index;
-                    m.set_status("calibrate: visiting the cage");
+                    m.reporting.set_status("calibrate: visiting the cage");
                     return Step::Stay(Cmd::move_to(m.cfg.calibration.cage_m[i], self.yaw_rad, cfg.speed_mps));
                 };
                 if timed_out(&m.cfg, self.stage_frame, c.frame_index, cfg.point_timeout_s) {
-                    return Step::Fail(format!("calibrate: cage point {i} {:?} not reached in {} s", m.cfg.calibration.cage_m[i], cfg.point_timeout_s));
+                    return Step::fail(FailureKind::TimedOut, format!("calibrate: cage point {i} {:?} not reached in {} s", m.cfg.calibration.cage_m[i], cfg.point_timeout_s));
                 }
                 match w.poll(c, cfg.settle_frames) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
                     MovePoll::Rejected(code) => {
-                        Step::Fail(format!("calibrate: the robot refused cage point {i} {:?}: {}", m.cfg.calibration.cage_m[i], reject_text(code)))
+                        Step::fail(
+                            FailureKind::RobotRefused,
+                            format!("calibrate: the robot refused cage point {i} {:?}: {}", m.cfg.calibration.cage_m[i], RejectReason::text_of(code)),
+                        )
                     }
                     MovePoll::Done => {
                         self.acc_w = [0.0; 4];
@@ -115,32 +148,31 @@ impl Calibrate {
                 }
             }
             Stage::Sampling { .. } => self.sample(m, c),
-            Stage::Fitting { wait, submitted } => {
-                if submitted.is_none() {
-                    let job = Job::Calibrate { robot_m: self.robot_m.clone(), image_px: self.image_px.clone() };
-                    if m.worker.try_submit(job).is_ok() {
-                        *submitted = Some(c.frame_index);
-                    }
+            Stage::Fitting { wait, job } => {
+                if job.is_none() {
+                    let (robot_m, image_px) = (self.robot_m.clone(), self.image_px.clone());
+                    *job = PendingJob::submit(&mut m.worker, c.frame_index, move || fit(&robot_m, &image_px));
                 }
-                let ready = submitted.is_some_and(|f| c.frame_index >= f + super::WORKER_DELAY_FRAMES);
                 let Some(w) = wait else {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
-                    m.set_status("calibrate: fitting; arm returning");
-                    let (p, yaw) = m.start_pose.unwrap_or(([0.3, 0.0, 0.18], self.yaw_rad));
+                    m.reporting.set_status("calibrate: fitting; arm returning");
+                    let (p, yaw) = m.calibration.start_pose().unwrap_or(([0.3, 0.0, 0.18], self.yaw_rad));
                     let park = cfg.park.unwrap_or(p);
                     return Step::Stay(Cmd::move_to(park, yaw, cfg.speed_mps));
                 };
                 match w.poll(c, cfg.settle_frames) {
-                    MovePoll::Rejected(code) => return Step::Fail(format!("calibrate: the robot refused the park pose: {}", reject_text(code))),
+                    MovePoll::Rejected(code) => {
+                        return Step::fail(FailureKind::RobotRefused, format!("calibrate: the robot refused the park pose: {}", RejectReason::text_of(code)));
+                    }
                     MovePoll::Done => self.arrived_back = true,
                     MovePoll::Pending => {}
                 }
-                if self.fitted.is_none() && ready {
-                    match m.worker.try_result() {
-                        None => {}
-                        Some(JobResult::Calibration(Ok(fit))) => self.fitted = Some(fit),
-                        Some(JobResult::Calibration(Err(e))) => return Step::Fail(format!("calibrate: {e}")),
-                        Some(_) => return Step::Fail("calibrate: unexpected worker result".into()),
+                if self.fitted.is_none()
+                    && let Some(result) = job.as_mut().and_then(|j| j.poll(&mut m.worker, c.frame_index))
+                {
+                    match result {
+                        Ok(fit) => self.fitted = Some(fit),
+                        Err(e) => return Step::fail(FailureKind::Calibration, format!("calibrate: {e}")),
                     }
                 }
                 let (Some((model, epipolar, epi_rms)), true) = (self.fitted.clone(), self.arrived_back) else { return Step::Stay(Cmd::HOLD) };
@@ -151,29 +183,27 @@ impl Calibrate {
                     disparity_range_px: model.disparity_range_px,
                 };
                 if stats.residual_rms_px > cfg.max_residual_px {
-                    return Step::Fail(format!(
+                    return Step::fail(
+                        FailureKind::Calibration,
+                        format!(
                         "calibrate: refused: affine fit residual {:.2} px RMS > {} px (a tracker slipped, or the cameras are far from weak perspective)",
                         stats.residual_rms_px, cfg.max_residual_px
-                    ));
+                    ),
+                    );
                 }
                 if stats.epipolar_rms_px > cfg.max_epipolar_px {
-                    return Step::Fail(format!("calibrate: refused: epipolar residual {:.2} px RMS > {} px", stats.epipolar_rms_px, cfg.max_epipolar_px));
+                    return Step::fail(FailureKind::Calibration, format!("calibrate: refused: epipolar residual {:.2} px RMS > {} px", stats.epipolar_rms_px, cfg.max_epipolar_px));
                 }
                 let servo_model = match ServoModel::new(&model) {
                     Ok(s) => s,
-                    Err(e) => return Step::Fail(format!("calibrate: unusable model: {e}")),
+                    Err(e) => return Step::fail(FailureKind::Calibration, format!("calibrate: unusable model: {e}")),
                 };
-                m.calibration = Some(Calibration {
-                    model,
-                    epipolar,
-                    servo_model,
-                    stats,
-                    cage_robot_m: self.robot_m.clone(),
-                    cage_image_px: self.image_px.clone(),
-                });
-                m.calibration_yaw_rad = Some(self.yaw_rad);
-                m.snapshot = Some("calibrated");
-                m.set_status("calibrated");
+                m.calibration.set(
+                    Calibration { model, epipolar, servo_model, stats, cage_robot_m: self.robot_m.clone(), cage_image_px: self.image_px.clone() },
+                    self.yaw_rad,
+                );
+                m.reporting.snapshot("calibrated");
+                m.reporting.set_status("calibrated");
                 Step::Next(Cmd::HOLD)
             }
         }
@@ -182,7 +212,7 @@ impl Calibrate {
     fn sample(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let Stage::Sampling { i, n } = &mut self.stage else { return Step::Stay(Cmd::HOLD) };
         let (Some(l), Some(r)) = (m.trackers.get(Role::Gripper, View::Left), m.trackers.get(Role::Gripper, View::Right)) else {
-            return Step::Fail("calibrate: no gripper trackers".into());
+            return Step::fail(FailureKind::Internal, "calibrate: no gripper trackers");
         };
         let st = nalgebra::Vector2::new(m.plate.reference_st[0], m.plate.reference_st[1]);
         let (pl, pr) = (l.image_from_template(st), r.image_from_template(st));
@@ -203,7 +233,7 @@ impl Calibrate {
         self.stage = if next < m.cfg.calibration.cage_m.len() {
             Stage::Moving { i: next, wait: None }
         } else {
-            Stage::Fitting { wait: None, submitted: None }
+            Stage::Fitting { wait: None, job: None }
         };
         Step::Stay(Cmd::HOLD)
     }
@@ -211,9 +241,22 @@ impl Calibrate {
 
 /// Worker job: the affine model (which carries its residual and disparity limits) and the
 /// epipolar constraint fitted from the images alone, with that constraint's RMS residual.
-pub fn fit(robot_m: &[Vector3<f64>], image_px: &[[f64; 4]]) -> Result<(AffineStereo, EpipolarConstraint, f64), String> {
-    let model = AffineStereo::fit(robot_m, image_px).map_err(|e| format!("affine fit: {e}"))?;
-    let epipolar = EpipolarConstraint::fit(image_px).map_err(|e| format!("epipolar fit: {e}"))?;
+pub fn fit(robot_m: &[Vector3<f64>], image_px: &[[f64; 4]]) -> Result<Fitted, CalibrationFitError> {
+    let model = AffineStereo::fit(robot_m, image_px).map_err(CalibrationFitError::Affine)?;
+    let epipolar = EpipolarConstraint::fit(image_px).map_err(CalibrationFitError::Epipolar)?;
     let rms = (image_px.iter().map(|w| epipolar.residual_px(w).powi(2)).sum::<f64>() / image_px.len() as f64).sqrt();
     Ok((model, epipolar, rms))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_time_out_names_the_stage_as_before() {
+        let wait = Some(MoveWait::new(3, 10));
+        assert_eq!(format!("{:?}", Stage::Fitting { wait, job: None }), "Fitting { wait: Some(MoveWait { seq: 3, sent_frame: 10, settled: 0 }), submitted: None }");
+        assert_eq!(format!("{:?}", Stage::Moving { i: 2, wait: None }), "Moving { i: 2, wait: None }");
+        assert_eq!(format!("{:?}", Stage::Sampling { i: 1, n: 4 }), "Sampling { i: 1, n: 4 }");
+    }
 }

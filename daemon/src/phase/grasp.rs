@@ -4,9 +4,11 @@
 //! something, then lift and check again.
 
 use handeye_vision::tracker::{Role, View};
-use handeye_wire::{robot_flags, GripperCommand};
+use handeye_wire::report::FailureKind;
+use handeye_wire::{robot_flags, GripperCommand, RejectReason};
 
-use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, Step};
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use crate::mission::Mission;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum GraspStage {
@@ -30,7 +32,7 @@ impl Grasp {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
-            return Step::Fail(format!("grasp: timed out after {} s in {:?}", m.cfg.grasp.timeout_s, self.stage));
+            return Step::fail(FailureKind::TimedOut, format!("grasp: timed out after {} s in {:?}", m.cfg.grasp.timeout_s, self.stage));
         }
         let speed = m.cfg.grasp.approach_speed_mps;
         match &mut self.stage {
@@ -43,36 +45,40 @@ impl Grasp {
                         }
                     }
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
-                    m.set_status("grasp: jaws over the target");
+                    m.reporting.set_status("grasp: jaws over the target");
                     return Step::Stay(Cmd::move_by(self.approach_m, 0.0, speed));
                 };
                 match w.poll(c, 1) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
-                    MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the approach: {}", reject_text(code))),
+                    MovePoll::Rejected(code) => {
+                        Step::fail(FailureKind::RobotRefused, format!("grasp: the robot refused the approach: {}", RejectReason::text_of(code)))
+                    }
                     MovePoll::Done => {
                         self.stage = GraspStage::Down { wait: Some(MoveWait::new(c.seq, c.frame_index)) };
-                        m.set_status("grasp: descending");
-                        m.snapshot = Some("over_target");
+                        m.reporting.set_status("grasp: descending");
+                        m.reporting.snapshot("over_target");
                         // Down to the grasp height by the robot's own kinematics: the
                         // configured height above the table, or the planned one (the
                         // fingers' tips at the low-water mark the plan's collision test
                         // cleared) when it is higher.
                         let floor = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m;
-                        let z = m.target.as_ref().and_then(|t| t.grasp_tool_z_m).map_or(floor, |z| z.max(floor));
+                        let z = m.targeting.target().and_then(|t| t.grasp_tool_z_m).map_or(floor, |z| z.max(floor));
                         let dz = z - f64::from(c.robot.tool_pos_m[2]);
                         Step::Stay(Cmd::move_by([0.0, 0.0, dz], 0.0, speed))
                     }
                 }
             }
             GraspStage::Down { wait } => {
-                let Some(w) = wait else { return Step::Fail("grasp: lost track of the descent".into()) };
+                let Some(w) = wait else { return Step::fail(FailureKind::Internal, "grasp: lost track of the descent") };
                 match w.poll(c, 2) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
-                    MovePoll::Rejected(code) => Step::Fail(format!("grasp: the robot refused the descent: {}", reject_text(code))),
+                    MovePoll::Rejected(code) => {
+                        Step::fail(FailureKind::RobotRefused, format!("grasp: the robot refused the descent: {}", RejectReason::text_of(code)))
+                    }
                     MovePoll::Done => {
                         self.stage = GraspStage::Close { since: None };
-                        m.set_status("grasp: closing");
-                        m.snapshot = Some("closing");
+                        m.reporting.set_status("grasp: closing");
+                        m.reporting.snapshot("closing");
                         Step::Stay(Cmd::gripper(GripperCommand::Close))
                     }
                 }
@@ -87,11 +93,11 @@ impl Grasp {
                     return Step::Stay(Cmd::HOLD);
                 }
                 let width = f64::from(c.robot.gripper_width_m);
-                m.grip_width_m = Some(width);
+                m.servo.set_grip_width_m(width);
                 if width < m.cfg.grasp.min_grip_width_m {
-                    return Step::Fail(format!("grasp: the jaws closed on nothing (width {:.1} mm)", width * 1e3));
+                    return Step::fail(FailureKind::GraspLost, format!("grasp: the jaws closed on nothing (width {:.1} mm)", width * 1e3));
                 }
-                m.snapshot = Some("grasped");
+                m.reporting.snapshot("grasped");
                 Step::Next(Cmd::HOLD)
             }
         }
@@ -110,23 +116,23 @@ impl Lift {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
-            return Step::Fail(format!("lift: timed out after {} s", m.cfg.grasp.timeout_s));
+            return Step::fail(FailureKind::TimedOut, format!("lift: timed out after {} s", m.cfg.grasp.timeout_s));
         }
         let Some(w) = self.wait.as_mut() else {
             self.wait = Some(MoveWait::new(c.seq, c.frame_index));
-            m.set_status("lift");
+            m.reporting.set_status("lift");
             return Step::Stay(Cmd::move_by([0.0, 0.0, m.cfg.grasp.lift_m], 0.0, m.cfg.grasp.lift_speed_mps));
         };
         match w.poll(c, 2) {
             MovePoll::Pending => Step::Stay(Cmd::HOLD),
-            MovePoll::Rejected(code) => Step::Fail(format!("lift: the robot refused the lift: {}", reject_text(code))),
+            MovePoll::Rejected(code) => Step::fail(FailureKind::RobotRefused, format!("lift: the robot refused the lift: {}", RejectReason::text_of(code))),
             MovePoll::Done => {
                 let width = f64::from(c.robot.gripper_width_m);
                 if width < m.cfg.grasp.min_grip_width_m {
-                    return Step::Fail(format!("lift: the object slipped out (jaw width {:.1} mm)", width * 1e3));
+                    return Step::fail(FailureKind::GraspLost, format!("lift: the object slipped out (jaw width {:.1} mm)", width * 1e3));
                 }
-                m.snapshot = Some("lifted");
-                m.set_status("done: target lifted");
+                m.reporting.snapshot("lifted");
+                m.reporting.set_status("done: target lifted");
                 Step::Next(Cmd::HOLD)
             }
         }

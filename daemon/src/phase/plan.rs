@@ -6,27 +6,43 @@
 //! facet's outline becomes the target for `acquire_target`, and its width, site and height
 //! go to the servo and the grasp.
 //!
-//! The result is taken no earlier than [`super::WORKER_DELAY_FRAMES`] after the pair was
+//! The result is taken no earlier than [`super::job::WORKER_DELAY_FRAMES`] after the pair was
 //! handed over (a fixed pipeline delay keeps lockstep runs repeatable whatever the
 //! worker's speed); if it is late the loop keeps waiting, tracking and answering.
+
+use std::fmt;
 
 use handeye_vision::grasp::{GraspConfig, GripperModel};
 use handeye_vision::planner::PlannerConfig;
 use handeye_vision::tracker::{Role, View};
-use handeye_wire::robot_flags;
+use handeye_wire::report::FailureKind;
+use handeye_wire::{robot_flags, RejectReason};
 use nalgebra::Vector3;
 
-use super::{reject_text, timed_out, Cmd, Cycle, Job, JobResult, Mission, MovePoll, MoveWait, PlanningStats, Step, TargetSource, TargetSpec};
-use crate::planning::{PlanRequest, PlannedTarget};
+use super::job::PendingJob;
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use crate::gripper::tool_from_reference;
+use crate::mission::{Mission, PlanningStats, TargetSource, TargetSpec};
+use crate::planning::{PlanCalibration, PlanOutput, PlanRequest, PlannedTarget, SceneLimits};
 
-#[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
     /// Going to the park pose (if not there).
     Park { wait: Option<MoveWait> },
     /// Arm still for this many frames.
     Settle { still: u32 },
-    /// The pair is with the planner since this frame.
-    Planning { submitted: u64 },
+    /// The pair is with the planner.
+    Planning { job: PendingJob<Box<PlanOutput>> },
+}
+
+/// The stage as the time-out's failure names it (the plan job by the frame it was submitted).
+impl fmt::Debug for Stage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Park { wait } => f.debug_struct("Park").field("wait", wait).finish(),
+            Self::Settle { still } => f.debug_struct("Settle").field("still", still).finish(),
+            Self::Planning { job } => f.debug_struct("Planning").field("submitted", &job.submitted_frame()).finish(),
+        }
+    }
 }
 
 pub struct PlanPhase {
@@ -64,7 +80,7 @@ pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
 /// the configured box around the reference point, projected with the calibrated model
 /// from the tracked reference point (only directions go through the model).
 fn gripper_masks(m: &Mission, yaw_rad: f64) -> Option<[Vec<[f64; 2]>; 2]> {
-    let cal = m.calibration.as_ref()?;
+    let cal = m.calibration.get()?;
     let n0 = m.cfg.gripper.normal_at_zero_yaw;
     let (s, c) = yaw_rad.sin_cos();
     let n = Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).try_normalize(1e-12)?;
@@ -102,7 +118,7 @@ impl PlanPhase {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.plan.timeout_s) {
-            return Step::Fail(format!("plan: timed out after {} s at {:?}", m.cfg.plan.timeout_s, self.stage));
+            return Step::fail(FailureKind::TimedOut, format!("plan: timed out after {} s at {:?}", m.cfg.plan.timeout_s, self.stage));
         }
         match &mut self.stage {
             Stage::Park { wait } => {
@@ -114,12 +130,14 @@ impl PlanPhase {
                         return Step::Stay(Cmd::HOLD);
                     }
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
-                    m.set_status("plan: parking clear of the blocks");
+                    m.reporting.set_status("plan: parking clear of the blocks");
                     return Step::Stay(Cmd::move_to([park[0], park[1], park[2]], f64::from(c.robot.tool_yaw_rad), m.cfg.calibration.speed_mps));
                 };
                 match w.poll(c, 1) {
                     MovePoll::Pending => Step::Stay(Cmd::HOLD),
-                    MovePoll::Rejected(code) => Step::Fail(format!("plan: the robot refused the park pose: {}", reject_text(code))),
+                    MovePoll::Rejected(code) => {
+                        Step::fail(FailureKind::RobotRefused, format!("plan: the robot refused the park pose: {}", RejectReason::text_of(code)))
+                    }
                     MovePoll::Done => {
                         self.stage = Stage::Settle { still: 0 };
                         Step::Stay(Cmd::HOLD)
@@ -130,13 +148,15 @@ impl PlanPhase {
                 let moving = c.robot.flags & robot_flags::MOVING != 0;
                 *still = if moving { 0 } else { *still + 1 };
                 if *still <= m.cfg.plan.settle_frames {
-                    m.set_status("plan: arm parked, settling");
+                    m.reporting.set_status("plan: arm parked, settling");
                     return Step::Stay(Cmd::HOLD);
                 }
-                let Some(cal) = m.calibration.as_ref() else { return Step::Fail("plan: not calibrated".into()) };
+                let Some(cal) = m.calibration.get() else { return Step::fail(FailureKind::Internal, "plan: not calibrated") };
                 let yaw = f64::from(c.robot.tool_yaw_rad);
-                let Some(masks) = gripper_masks(m, yaw) else { return Step::Fail("plan: no gripper trackers to mask the gripper with".into()) };
-                let lever = super::servo::tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw));
+                let Some(masks) = gripper_masks(m, yaw) else {
+                    return Step::fail(FailureKind::Internal, "plan: no gripper trackers to mask the gripper with");
+                };
+                let lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw));
                 let p = &m.cfg.plan;
                 let mut planner = PlannerConfig::default();
                 planner.matching.epipolar_tol_px = p.epipolar_tol_px;
@@ -156,73 +176,69 @@ impl PlanPhase {
                 // Allocates once: the pair the planner works on.
                 let request = PlanRequest {
                     images: [c.left.to_owned(), c.right.to_owned()],
-                    model: cal.model.clone(),
-                    cage_robot_m: cal.cage_robot_m.clone(),
-                    cage_image_px: cal.cage_image_px.clone(),
-                    lever_m: [lever.x, lever.y, lever.z],
+                    calibration: PlanCalibration {
+                        model: cal.model.clone(),
+                        cage_robot_m: cal.cage_robot_m.clone(),
+                        cage_image_px: cal.cage_image_px.clone(),
+                        lever_m: [lever.x, lever.y, lever.z],
+                    },
                     masks,
                     mask_margin_px: p.mask_margin_px,
-                    indicated_m: m.indicated_m,
-                    max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
-                    max_distance_m: p.max_site_distance_m,
-                    join_m: p.join_m,
-                    front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
-                    rear_edges_from_image: p.rear_edges_from_image,
+                    scene: SceneLimits {
+                        indicated_m: m.targeting.indicated_m(),
+                        max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
+                        max_distance_m: p.max_site_distance_m,
+                        join_m: p.join_m,
+                        front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
+                        rear_edges_from_image: p.rear_edges_from_image,
+                    },
                     planner,
                     grasp,
                     disparity_margin: p.disparity_margin,
                     disparity_margin_px: p.disparity_margin_px,
                 };
-                match m.worker.try_submit(Job::Plan(Box::new(request))) {
-                    Ok(()) => {
+                match PendingJob::submit(&mut m.worker, c.frame_index, move || Box::new(crate::planning::plan(request))) {
+                    Some(job) => {
                         self.updates_at_submit = Self::gripper_updates(m);
-                        self.stage = Stage::Planning { submitted: c.frame_index };
-                        m.set_status("plan: planning; gripper tracked meanwhile");
-                        m.snapshot = Some("planning");
+                        self.stage = Stage::Planning { job };
+                        m.reporting.set_status("plan: planning; gripper tracked meanwhile");
+                        m.reporting.snapshot("planning");
                     }
-                    Err(_) => m.set_status("plan: worker busy, waiting"),
+                    None => m.reporting.set_status("plan: worker busy, waiting"),
                 }
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Planning { submitted } => {
-                let submitted = *submitted;
-                if c.frame_index < submitted + super::WORKER_DELAY_FRAMES {
-                    return Step::Stay(Cmd::HOLD);
-                }
-                let out = match m.worker.try_result() {
-                    None => return Step::Stay(Cmd::HOLD),
-                    Some(JobResult::Plan(out)) => out,
-                    Some(_) => return Step::Fail("plan: unexpected worker result".into()),
-                };
+            Stage::Planning { job } => {
+                let Some(out) = job.poll(&mut m.worker, c.frame_index) else { return Step::Stay(Cmd::HOLD) };
                 let now = Self::gripper_updates(m);
-                m.planning = Some(PlanningStats {
-                    frames: c.frame_index - submitted,
+                let stats = PlanningStats {
+                    frames: c.frame_index - job.submitted_frame(),
                     gripper_updates: [now[0] - self.updates_at_submit[0], now[1] - self.updates_at_submit[1]],
                     planner_ms: out.summary.planner_ms,
                     total_ms: out.summary.total_ms,
-                });
+                };
                 let summary = out.summary.clone();
                 let target = out.target.clone();
-                m.alternatives = out.alternatives.iter().map(|a| target_spec(a, m)).collect();
-                m.plan = Some(summary.clone());
-                m.plan_report = Some(out);
+                m.targeting.set_alternatives(out.alternatives.iter().map(target_spec).collect());
+                m.planning.record(summary.clone(), stats);
+                m.reporting.plan(out);
                 let Some(t) = target else {
-                    if let (Some(nearest), Some(_)) = (summary.candidates.first(), m.indicated_m) {
-                        return Step::Fail(format!(
+                    if let (Some(nearest), Some(_)) = (summary.candidates.first(), m.targeting.indicated_m()) {
+                        return Step::fail(FailureKind::NoGraspSite, format!(
                             "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away)",
                             m.cfg.plan.max_site_distance_m * 1e3,
                             nearest.distance_mm.unwrap_or(f64::NAN)
                         ));
                     }
                     let reasons: Vec<String> = summary.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
-                    return Step::Fail(format!(
+                    return Step::fail(FailureKind::NoGraspSite, format!(
                         "plan: no grasp site ({} facets; rejected: {})",
                         summary.facets.len(),
                         if reasons.is_empty() { "none found".into() } else { reasons.join(", ") }
                     ));
                 };
-                m.target = Some(target_spec(&t, m));
-                m.set_status("plan: grasp chosen");
+                m.targeting.set_target(target_spec(&t));
+                m.reporting.set_status("plan: grasp chosen");
                 Step::Next(Cmd::HOLD)
             }
         }
@@ -234,7 +250,7 @@ impl PlanPhase {
 /// heights come from the affine model extrapolated 10-15 cm below the cage of reference
 /// points, and came out ~2 cm high on 30-40 mm blocks (fingers closing above a bar). The
 /// plan's width sets how far the jaws go past the facet.
-fn target_spec(t: &PlannedTarget, _m: &Mission) -> TargetSpec {
+fn target_spec(t: &PlannedTarget) -> TargetSpec {
     TargetSpec {
         source: TargetSource::Plan,
         left_px: t.left_px.clone(),

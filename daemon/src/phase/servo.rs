@@ -37,10 +37,14 @@ use handeye_vision::servo::{
     CoplanarityServo, FacetGoal, GripperView, Motion, PlaneTransfer, ServoConfig, ServoModel, StepOutcome, StereoFrame, StereoPoint,
 };
 use handeye_vision::tracker::{Role, View};
+use handeye_wire::report::FailureKind;
+use handeye_wire::RejectReason;
 use nalgebra::Vector3;
 
-use super::{reject_text, timed_out, Cmd, Cycle, Mission, MovePoll, MoveWait, ServoTraceRow, Step};
-use crate::gripper::{gripper_view, stereo_frame};
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use crate::fault::Fault;
+use crate::gripper::{gripper_view, plate_normal, stereo_frame, tool_from_reference};
+use crate::mission::{Mission, ServoTraceRow};
 
 /// Offsets of the local cage points from the approach pose, in units of `local_cage_m`:
 /// sideways at the approach height and upwards, never down (the jaws hang right above the
@@ -146,24 +150,15 @@ fn wrap(a: f64) -> f64 {
     a - t * ((a + std::f64::consts::PI) / t).floor()
 }
 
-/// Unit plate normal in the robot frame at yaw `yaw_rad` (horizontal).
-fn plate_normal(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
-    let n0 = m.cfg.gripper.normal_at_zero_yaw;
-    let (s, c) = yaw_rad.sin_cos();
-    Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).normalize()
+/// Geometry the servo cannot work with: its goal, its model or its step.
+fn unusable(detail: String) -> Fault {
+    Fault::new(FailureKind::NotConverged, detail)
 }
 
-/// `tool − reference` in the robot frame at yaw `yaw_rad`.
-pub fn tool_from_reference(m: &Mission, yaw_rad: f64) -> Vector3<f64> {
-    let n = plate_normal(m, yaw_rad);
-    let up = Vector3::z();
-    let a = up.cross(&n);
-    let t = m.cfg.gripper.tool_from_reference_m;
-    a * t[0] + up * t[1] + n * t[2]
-}
-
-fn views(m: &Mission) -> Result<(StereoFrame, GripperView), String> {
-    let get = |role, view| m.trackers.get(role, view).ok_or_else(|| format!("servo: no {role:?} tracker in the {view:?} view"));
+fn views(m: &Mission) -> Result<(StereoFrame, GripperView), Fault> {
+    let get = |role, view| {
+        m.trackers.get(role, view).ok_or_else(|| Fault::new(FailureKind::Internal, format!("servo: no {role:?} tracker in the {view:?} view")))
+    };
     let target = stereo_frame(get(Role::Target, View::Left)?, get(Role::Target, View::Right)?);
     let gripper = gripper_view(&m.plate, get(Role::Gripper, View::Left)?, get(Role::Gripper, View::Right)?);
     Ok((target, gripper))
@@ -175,18 +170,18 @@ fn views(m: &Mission) -> Result<(StereoFrame, GripperView), String> {
 /// parallax by construction, so the marks' goal parallaxes differ only by the facet's own
 /// measured transfer, not by the model's reconstruction of the facet's tilt (which under
 /// perspective is off by a degree or more, and would leave the plate turned by as much).
-fn facet_normal(model: &ServoModel, toward_cameras: &Vector3<f64>, target: &StereoFrame) -> Result<Vector3<f64>, String> {
-    let transfer = PlaneTransfer::from_frames(target).map_err(|e| format!("servo: target: {e}"))?;
+fn facet_normal(model: &ServoModel, toward_cameras: &Vector3<f64>, target: &StereoFrame) -> Result<Vector3<f64>, Fault> {
+    let transfer = PlaneTransfer::from_frames(target).map_err(|e| unusable(format!("servo: target: {e}")))?;
     let mut n: Vector3<f64> = model.parallax_gradient(&transfer).transpose();
     if n.norm().is_nan() || n.norm() <= 1e-9 {
-        return Err("servo: the target facet has no parallax gradient (seen edge-on?)".into());
+        return Err(unusable("servo: the target facet has no parallax gradient (seen edge-on?)".into()));
     }
     n /= n.norm();
     if n.dot(toward_cameras) < 0.0 {
         n = -n;
     }
     if n.z.abs() > 25f64.to_radians().sin() {
-        return Err(format!("servo: the target facet is {:.0}° from vertical; the jaws close horizontally", n.z.abs().asin().to_degrees()));
+        return Err(unusable(format!("servo: the target facet is {:.0}° from vertical; the jaws close horizontally", n.z.abs().asin().to_degrees())));
     }
     Ok(Vector3::new(n.x, n.y, 0.0).normalize())
 }
@@ -202,10 +197,10 @@ fn facet_goal(m: &Mission, offset: &Vector3<f64>, a: &Vector3<f64>) -> FacetGoal
 /// How far the planned grasp site (template points `st`, left and right view) lies from the
 /// target's frame origin along the facet's horizontal axis `a`, m, as `model` reconstructs
 /// both from the target trackers now (the calibration lever cancels in the difference).
-fn site_along_m(m: &Mission, model: &ServoModel, st: &[[f64; 2]; 2], a: &Vector3<f64>) -> Result<f64, String> {
+fn site_along_m(m: &Mission, model: &ServoModel, st: &[[f64; 2]; 2], a: &Vector3<f64>) -> Result<f64, Fault> {
     let (target, _) = views(m)?;
     let at = |view, k: usize| m.trackers.get(Role::Target, view).map(|t| t.image_from_template(nalgebra::Vector2::new(st[k][0], st[k][1])));
-    let (Some(l), Some(r)) = (at(View::Left, 0), at(View::Right, 1)) else { return Err("servo: no target trackers".into()) };
+    let (Some(l), Some(r)) = (at(View::Left, 0), at(View::Right, 1)) else { return Err(Fault::new(FailureKind::Internal, "servo: no target trackers")) };
     let site = model.reconstruct(&StereoPoint { left: [l.x, l.y], right: [r.x, r.y] });
     let origin = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o });
     Ok(a.dot(&(site - origin)))
@@ -213,9 +208,9 @@ fn site_along_m(m: &Mission, model: &ServoModel, st: &[[f64; 2]; 2], a: &Vector3
 
 impl ServoPhase {
     /// Plans the goal and the coarse approach from the current views (called once, on entry).
-    pub fn new(m: &mut Mission, c: &Cycle<'_>) -> Result<Self, String> {
-        let cal = m.calibration.clone().ok_or("servo: not calibrated")?;
-        let target_spec = m.target.clone().ok_or("servo: no target")?;
+    pub fn new(m: &mut Mission, c: &Cycle<'_>) -> Result<Self, Fault> {
+        let cal = m.calibration.get().cloned().ok_or_else(|| Fault::new(FailureKind::Internal, "servo: not calibrated"))?;
+        let target_spec = m.targeting.target().cloned().ok_or_else(|| Fault::new(FailureKind::Internal, "servo: no target"))?;
         let depth_m = target_spec.depth_m.max(0.0);
         let s = m.cfg.servo.clone();
         let config = ServoConfig {
@@ -234,7 +229,7 @@ impl ServoPhase {
             angle_weight: s.angle_weight,
             ..ServoConfig::default()
         };
-        let servo = CoplanarityServo::new(cal.servo_model, config).map_err(|e| format!("servo: {e}"))?;
+        let servo = CoplanarityServo::new(cal.servo_model, config).map_err(|e| unusable(format!("servo: {e}")))?;
         let (target, _) = views(m)?;
         let model = &cal.servo_model;
         let n = facet_normal(model, &cal.model.toward_cameras(), &target)?;
@@ -243,7 +238,7 @@ impl ServoPhase {
         // The model maps tool positions to the reference point's images, so a scene point P
         // reconstructs as P − (reference − tool) at the calibration's yaw.
         let yaw_now = f64::from(c.robot.tool_yaw_rad);
-        let cal_lever = tool_from_reference(m, m.calibration_yaw_rad.unwrap_or(yaw_now));
+        let cal_lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw_now));
         let facet_origin = model.reconstruct(&StereoPoint { left: target.left.o, right: target.right.o }) - cal_lever;
         // A planned grasp site (thesis §6.3.4: "expressed in a coordinate system based on the
         // target facet"): the goal moves along the facet by the site's offset from the facet
@@ -266,10 +261,9 @@ impl ServoPhase {
         let tool_goal = facet_origin + tool_rel;
         let n0 = m.cfg.gripper.normal_at_zero_yaw;
         let yaw_goal = yaw_now + wrap(n.y.atan2(n.x) - n0[1].atan2(n0[0]) - yaw_now);
-        m.servo_trace.clear();
-        m.servo_steps = 0;
-        m.snapshot = Some("servo_start");
-        m.set_status("servo: coarse approach from the reconstruction");
+        m.servo.restart();
+        m.reporting.snapshot("servo_start");
+        m.reporting.set_status("servo: coarse approach from the reconstruction");
         tracing::info!(?offset_m, along_m, ?tool_goal, yaw_goal, "servo plan");
         let mut target_recent = TargetMean::default();
         target_recent.add(&target);
@@ -295,7 +289,7 @@ impl ServoPhase {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.timeout_s) {
-            return Step::Fail(format!("servo: not converged after {} s ({} steps)", m.cfg.servo.timeout_s, m.servo_steps));
+            return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.timeout_s, m.servo.steps()));
         }
         // Every frame adds to the target's running means (it stands still; the arm moves).
         if let Ok((target, _)) = views(m) {
@@ -307,7 +301,9 @@ impl ServoPhase {
         if let Some(w) = self.wait.as_mut() {
             match w.poll(c, m.cfg.servo.settle_frames) {
                 MovePoll::Pending => return Step::Stay(Cmd::HOLD),
-                MovePoll::Rejected(code) => return Step::Fail(format!("servo: the robot refused a move ({:?}): {}", self.stage, reject_text(code))),
+                MovePoll::Rejected(code) => {
+                    return Step::fail(FailureKind::RobotRefused, format!("servo: the robot refused a move ({:?}): {}", self.stage, RejectReason::text_of(code)));
+                }
                 MovePoll::Done => self.wait = None,
             }
         }
@@ -320,15 +316,15 @@ impl ServoPhase {
                     self.target_cage = TargetMean::default();
                     Stage::LocalCage { i: 0, n: 0 }
                 } else {
-                    m.set_status("servo: aligning the plate with the facet");
+                    m.reporting.set_status("servo: aligning the plate with the facet");
                     Stage::Servo { converging: false }
                 };
                 Step::Stay(Cmd::move_to(p, yaw, speed))
             }
             Stage::LocalCage { i, n } => self.local_cage(m, c, i, n),
             Stage::Servo { converging: true } => {
-                m.snapshot = Some("servo_converged");
-                m.set_status("servo converged");
+                m.reporting.snapshot("servo_converged");
+                m.reporting.set_status("servo converged");
                 Step::Next(Cmd::HOLD)
             }
             Stage::Servo { converging: false } => self.look_and_move(m, c),
@@ -356,7 +352,7 @@ impl ServoPhase {
             Stage::Servo { converging: false }
         };
         let rows = if view == View::Left { [0, 1] } else { [2, 3] };
-        if let Some(cal) = m.calibration.as_mut() {
+        if let Some(cal) = m.calibration.get_mut() {
             cal.model.c[rows[0]] += shift_px[0];
             cal.model.c[rows[1]] += shift_px[1];
             if let Ok(model) = ServoModel::new(&cal.model) {
@@ -369,14 +365,14 @@ impl ServoPhase {
             Ok(servo) => self.servo = servo,
             Err(_) => self.servo.reset(),
         }
-        m.set_status("servo: resumed after re-acquiring");
+        m.reporting.set_status("servo: resumed after re-acquiring");
     }
 
     /// At local cage point `i` (arrived and settled): sample, then move on; after the last,
     /// fit the local model and start the servo with it.
     fn local_cage(&mut self, m: &mut Mission, c: &Cycle<'_>, i: usize, n: u32) -> Step {
         let (Some(l), Some(r)) = (m.trackers.get(Role::Gripper, View::Left), m.trackers.get(Role::Gripper, View::Right)) else {
-            return Step::Fail("servo: no gripper trackers".into());
+            return Step::fail(FailureKind::Internal, "servo: no gripper trackers");
         };
         let st = nalgebra::Vector2::new(m.plate.reference_st[0], m.plate.reference_st[1]);
         let (pl, pr) = (l.image_from_template(st), r.image_from_template(st));
@@ -399,24 +395,24 @@ impl ServoPhase {
             let d = m.cfg.servo.local_cage_m;
             let (p0, yaw) = self.approach_pose;
             let o = LOCAL_CAGE[i + 1];
-            m.set_status("servo: local cage around the approach pose");
+            m.reporting.set_status("servo: local cage around the approach pose");
             return Step::Stay(Cmd::move_to([p0[0] + d * o[0], p0[1] + d * o[1], p0[2] + d * o[2]], yaw, speed));
         }
         // Fit (7 points: microseconds, so on the loop), then back to the approach pose.
         let local = AffineStereo::fit(&self.local_robot_m, &self.local_image_px).map_err(|e| format!("servo: local fit: {e}"));
         let local = match local.and_then(|f| ServoModel::new(&f).map(|s| (f, s)).map_err(|e| format!("servo: local model: {e}"))) {
             Ok(x) => x,
-            Err(e) => return Step::Fail(e),
+            Err(e) => return Step::Fail(unusable(e)),
         };
         if local.0.residual_rms_px > m.cfg.calibration.max_residual_px {
-            return Step::Fail(format!("servo: local cage residual {:.2} px RMS is too large", local.0.residual_rms_px));
+            return Step::Fail(unusable(format!("servo: local cage residual {:.2} px RMS is too large", local.0.residual_rms_px)));
         }
         // The facet's orientation again, through the local model and from the target frames
         // averaged over the whole visit: the plate's marks are placed along it.
         let Some(target) = self.target_cage.mean().or_else(|| self.target_recent.mean()) else {
-            return Step::Fail("servo: no target frames during the local cage".into());
+            return Step::fail(FailureKind::Internal, "servo: no target frames during the local cage");
         };
-        let toward = m.calibration.as_ref().map(|cal| cal.model.toward_cameras()).unwrap_or_else(|| local.0.toward_cameras());
+        let toward = m.calibration.get().map(|cal| cal.model.toward_cameras()).unwrap_or_else(|| local.0.toward_cameras());
         let n = match facet_normal(&local.1, &toward, &target) {
             Ok(n) => n,
             Err(e) => return Step::Fail(e),
@@ -435,12 +431,12 @@ impl ServoPhase {
         self.goal = facet_goal(m, &self.offset_m, &a);
         self.servo = match CoplanarityServo::new(local.1, self.config) {
             Ok(s) => s,
-            Err(e) => return Step::Fail(format!("servo: {e}")),
+            Err(e) => return Step::Fail(unusable(format!("servo: {e}"))),
         };
         tracing::info!(residual_px = local.0.residual_rms_px, frames = self.target_cage.n, ?n, "local model");
         self.stage = Stage::Servo { converging: false };
         self.wait = Some(MoveWait::new(c.seq, c.frame_index));
-        m.set_status("servo: aligning the plate with the facet");
+        m.reporting.set_status("servo: aligning the plate with the facet");
         let (p0, yaw) = self.approach_pose;
         Step::Stay(Cmd::move_to(p0, yaw, speed))
     }
@@ -458,18 +454,16 @@ impl ServoPhase {
         let above_goal_m = f64::from(c.robot.tool_pos_m[2]) - self.approach_pose.0[2];
         let goal = match self.goal.image_goal_at_height(self.servo.model(), &target, &gripper.reference, above_goal_m) {
             Ok(g) => g,
-            Err(e) => return Step::Fail(format!("servo: goal: {e}")),
+            Err(e) => return Step::Fail(unusable(format!("servo: goal: {e}"))),
         };
         if tracing::enabled!(tracing::Level::TRACE) {
             let corners = |role, view| m.trackers.get(role, view).map(|t| t.corners().map(|p| [p.x, p.y]).collect::<Vec<_>>());
             tracing::trace!(frame = c.frame_index, target_l = ?corners(Role::Target, View::Left), target_r = ?corners(Role::Target, View::Right), plate_l = ?corners(Role::Gripper, View::Left), plate_r = ?corners(Role::Gripper, View::Right), "servo corners");
         }
         let step = self.servo.step(&target, &gripper, &goal);
-        m.servo_steps = step.step;
+        m.servo.set_steps(step.step);
         if let Some(meas) = step.measurement {
-            for (dst, src) in m.servo_error.iter_mut().zip(meas.error.iter()) {
-                *dst = *src;
-            }
+            m.servo.set_error(meas.error.as_slice());
             tracing::debug!(
                 step = step.step,
                 frame = c.frame_index,
@@ -483,28 +477,26 @@ impl ServoPhase {
                 "servo step"
             );
         }
-        if m.servo_trace.len() < m.servo_trace.capacity() {
-            m.servo_trace.push(ServoTraceRow {
-                step: step.step,
-                frame: c.frame_index,
-                error: m.servo_error,
-                offset_m: step.offset.translation_m.norm(),
-                offset_yaw_rad: step.offset.yaw_rad,
-            });
-        }
+        m.servo.push(ServoTraceRow {
+            step: step.step,
+            frame: c.frame_index,
+            error: m.servo.error(),
+            offset_m: step.offset.translation_m.norm(),
+            offset_yaw_rad: step.offset.yaw_rad,
+        });
         match step.outcome {
             StepOutcome::Failed(f) => {
                 if let Ok(j) = self.servo.model().jacobian(&target, &gripper) {
                     tracing::warn!(jacobian = ?j, ?target, ?gripper, measurement = ?step.measurement, "servo failed");
                 }
-                Step::Fail(format!("servo: {f}"))
+                Step::Fail(unusable(format!("servo: {f}")))
             }
             StepOutcome::Move | StepOutcome::Converged => {
                 if step.outcome == StepOutcome::Converged {
                     self.stage = Stage::Servo { converging: true };
                     // Coplanar now: the plate's normal is the best estimate of the facet's,
                     // and the open-loop approach goes along it.
-                    let n = plate_normal(m, f64::from(c.robot.tool_yaw_rad) + step.motion.yaw_rad);
+                    let n = plate_normal(&m.cfg.gripper, f64::from(c.robot.tool_yaw_rad) + step.motion.yaw_rad);
                     self.approach_m = (n * (-m.cfg.gripper.tool_from_reference_m[2] - self.depth_m / 2.0)).into();
                 }
                 let cmd = self.tool_move(m, c, &step.motion);
@@ -517,7 +509,7 @@ impl ServoPhase {
     /// The servo's move (reference point translation, yaw about it) as a tool move.
     fn tool_move(&self, m: &Mission, c: &Cycle<'_>, motion: &Motion) -> Cmd {
         let yaw = f64::from(c.robot.tool_yaw_rad);
-        let lever = tool_from_reference(m, yaw);
+        let lever = tool_from_reference(&m.cfg.gripper, yaw);
         let (s, co) = motion.yaw_rad.sin_cos();
         let turned = Vector3::new(co * lever.x - s * lever.y, s * lever.x + co * lever.y, lever.z);
         let d = motion.translation_m + (turned - lever);

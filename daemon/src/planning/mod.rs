@@ -1,7 +1,7 @@
 //! The plan phase's work on the worker thread (thesis ch. 5-6): mask the gripper out of one
 //! stereo pair, find facets with the planner, turn them into a grasp scene in robot
 //! coordinates through the calibrated affine model, plan grasps, and pick the one nearest
-//! the indicated point. Pure (no I/O); [`crate::phase::plan`] runs it and takes the result.
+//! the indicated point. Pure (no I/O); the plan phase (`phase/plan.rs`) runs it and takes the result.
 //!
 //! **Coordinates.** The calibration maps *tool* positions to the images of the plate's
 //! reference point: `w = M X_tool + c`. A scene point `P` seen at `w` is where the reference
@@ -52,7 +52,20 @@ pub const IMAGE_REAR_EDGE: usize = usize::MAX;
 pub struct PlanRequest {
     /// The stereo pair, as taken with the arm parked (left, right).
     pub images: [ImageBuf; 2],
-    /// The calibration: tool positions to the reference point's images (tracker pixels).
+    pub calibration: PlanCalibration,
+    /// The gripper's image region in each view (tracker pixels), masked before planning.
+    pub masks: [Vec<[f64; 2]>; 2],
+    pub mask_margin_px: f64,
+    pub scene: SceneLimits,
+    pub planner: PlannerConfig,
+    pub grasp: GraspConfig,
+    pub disparity_margin: f64,
+    pub disparity_margin_px: f64,
+}
+
+/// The calibration as the planner uses it.
+pub struct PlanCalibration {
+    /// Tool positions to the reference point's images (tracker pixels).
     pub model: AffineStereo,
     /// The cage it was fitted to: tool positions (m) and reference-point images (tracker
     /// pixels). With >= 6 points the planner reconstructs through pinhole cameras fitted to
@@ -61,9 +74,10 @@ pub struct PlanRequest {
     pub cage_image_px: Vec<[f64; 4]>,
     /// `tool − reference` at the calibration's yaw, robot frame, m.
     pub lever_m: [f64; 3],
-    /// The gripper's image region in each view (tracker pixels), masked before planning.
-    pub masks: [Vec<[f64; 2]>; 2],
-    pub mask_margin_px: f64,
+}
+
+/// Where to look for the operator's object and what counts as one.
+pub struct SceneLimits {
     /// The operator's indicated point, robot frame, m.
     pub indicated_m: Option<[f64; 3]>,
     /// Features entirely above this height are the arm, m.
@@ -79,10 +93,6 @@ pub struct PlanRequest {
     /// A grasp whose centre is farther than this from the indicated point (plan view) is
     /// not on the block the operator meant: no grasp then, m.
     pub max_distance_m: f64,
-    pub planner: PlannerConfig,
-    pub grasp: GraspConfig,
-    pub disparity_margin: f64,
-    pub disparity_margin_px: f64,
 }
 
 /// The grasp to execute, in the terms the later phases need.
@@ -336,28 +346,28 @@ fn arr3(v: &Vector3<f64>) -> [f64; 3] {
 pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let start = Instant::now();
     let mut summary = PlanSummary {
-        indicated_m: req.indicated_m,
-        indicated_px: req.indicated_m.map(|p| project(&req.model, &req.lever_m, &Vector3::from(p))),
+        indicated_m: req.scene.indicated_m,
+        indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
         masks_px: req.masks.clone(),
         ..Default::default()
     };
     for (k, img) in req.images.iter_mut().enumerate() {
         summary.masked_px[k] = mask_and_fill(img, &req.masks[k], req.mask_margin_px);
     }
-    let scene_model = scene_model(&req.model, &req.lever_m);
+    let scene_model = scene_model(&req.calibration.model, &req.calibration.lever_m);
     summary.model = Some(serde_json::json!({
         "m": (0..4).map(|r| [scene_model.m[(r, 0)], scene_model.m[(r, 1)], scene_model.m[(r, 2)]]).collect::<Vec<_>>(),
         "c": [scene_model.c[0], scene_model.c[1], scene_model.c[2], scene_model.c[3]],
         "disparity_range_px": scene_model.disparity_range_px,
         "residual_rms_px": scene_model.residual_rms_px,
     }));
-    let toward = req.model.toward_cameras();
+    let toward = req.calibration.model.toward_cameras();
     // Pinhole cameras from the cage, for metric reconstruction: a scene point P images where
     // the reference point does with the tool at P + L, so the cage points become the
     // reference point's own positions, X_tool − L, seen at the planner's pixels.
-    let lever = Vector3::from(req.lever_m);
-    let points: Vec<Vector3<f64>> = req.cage_robot_m.iter().map(|x| x - lever).collect();
-    let images: Vec<[f64; 4]> = req.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
+    let lever = Vector3::from(req.calibration.lever_m);
+    let points: Vec<Vector3<f64>> = req.calibration.cage_robot_m.iter().map(|x| x - lever).collect();
+    let images: Vec<[f64; 4]> = req.calibration.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
     let mut geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
@@ -370,15 +380,15 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.matches = plan.matches.len();
     summary.planes = plan.planes.len();
     summary.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
-    let mut ps = scene_from_plan(&plan, toward, req.max_height_m, req.join_m);
+    let mut ps = scene_from_plan(&plan, toward, req.scene.max_height_m, req.scene.join_m);
     let planned_facets = ps.facets.len();
-    if let Some(table_z) = req.front_faces_to_table_z_m {
+    if let Some(table_z) = req.scene.front_faces_to_table_z_m {
         let project = |p: &Vector3<f64>| {
-            let px = project_scene(&geo, &req.model, &req.lever_m, p);
+            let px = project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, p);
             let ok = px.iter().flatten().all(|v| v.is_finite());
             ok.then(|| px.map(|q| [q[0] + PLANNER_FROM_TRACKER_PX, q[1] + PLANNER_FROM_TRACKER_PX]))
         };
-        hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.join_m);
+        hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.scene.join_m);
         // A hypothesised face must show its bottom edge, against the table, in both views:
         // one hung from a top edge where the block does not go straight down (the tall leg
         // of an L over its low leg) has none there.
@@ -444,7 +454,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             hypothesised: true,
         });
     }
-    let indicated = req.indicated_m.map(Vector3::from);
+    let indicated = req.scene.indicated_m.map(Vector3::from);
     let mut grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
         Ok(g) => g,
         Err(e) => {
@@ -456,13 +466,13 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     // No site near the point, or only zero-width ones (the thesis's thin wall; among
     // blocks, a top face the planner missed): look in the images for the rear edges behind
     // the vertical faces there (see `rear_edges_from_image`) and plan again.
-    let near_point = |g: &Grasp, p: &Vector3<f64>| (g.site.centre_m.xy() - p.xy()).norm() <= req.max_distance_m;
-    if req.rear_edges_from_image
+    let near_point = |g: &Grasp, p: &Vector3<f64>| (g.site.centre_m.xy() - p.xy()).norm() <= req.scene.max_distance_m;
+    if req.scene.rear_edges_from_image
         && let Some(p) = indicated
         && !grasps.candidates.iter().any(|g| near_point(g, &p) && g.site.width_m >= MIN_SOLID_WIDTH_M)
     {
-        let project = |q: &Vector3<f64>| project_scene(&geo, &req.model, &req.lever_m, q);
-        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.max_distance_m, &mut summary);
+        let project = |q: &Vector3<f64>| project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, q);
+        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.scene.max_distance_m, &mut summary);
         if found > 0
             && let Ok(g) = plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp)
         {
@@ -470,7 +480,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         }
     }
     let site_summary = |g: Option<&Grasp>, site: &handeye_vision::grasp::GraspSite, reason: Option<String>| {
-        let px = project_scene(&geo, &req.model, &req.lever_m, &site.front_m);
+        let px = project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, &site.front_m);
         SiteSummary {
             plan_facet: ps.facets[site.facet].plan_facet,
             hypothesised_facet: ps.facets[site.facet].hypothesised,
@@ -518,7 +528,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     }
     summary.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
     // The block nearest the point has no grasp site if the nearest site is far from it.
-    let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.max_distance_m);
+    let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.scene.max_distance_m);
     let chosen = grasps.chosen.filter(near);
     if grasps.chosen.is_some() && chosen.is_none() {
         summary.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
@@ -533,7 +543,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             left_px: pick(&src.left_px),
             right_px: pick(&src.right_px),
             width_m: g.site.width_m.max(0.0),
-            site_px: project_scene(&geo, &req.model, &req.lever_m, &g.site.front_m),
+            site_px: project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, &g.site.front_m),
             site_m: arr3(&g.site.front_m),
             tool_m: arr3(&g.tool_m),
         }

@@ -1,0 +1,124 @@
+//! What to grasp: the target facet (from the operator hint or the plan), the plan's other
+//! grasp sites to fall back on, the operator's indicated point, and how many targets were
+//! tried.
+
+use serde::{Deserialize, Serialize};
+
+use handeye_wire::hint::OperatorHint;
+
+/// Where the target came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetSource {
+    /// The operator clicked the facet in both views (`hint.json`).
+    Hint,
+    /// The grasp planner chose it.
+    Plan,
+}
+
+/// The target facet and how to grasp it: from the operator hint or from the plan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetSpec {
+    pub source: TargetSource,
+    /// The facet's outline in both views, tracker pixels, vertex for vertex.
+    pub left_px: Vec<[f64; 2]>,
+    pub right_px: Vec<[f64; 2]>,
+    /// Extent of the object behind the facet along its normal: the grasp width, m.
+    pub depth_m: f64,
+    /// The grasp site in both views when the target was chosen, tracker pixels (`None`:
+    /// the facet's centre).
+    pub site_px: Option<[[f64; 2]; 2]>,
+    /// The site in each target tracker's template coordinates, set once they are on the
+    /// facet: the site then moves with the tracked facet.
+    pub site_template: Option<[[f64; 2]; 2]>,
+    /// Tool height at the grasp, robot frame, m (`None`: `servo.grasp_height_m` above the
+    /// table).
+    pub grasp_tool_z_m: Option<f64>,
+}
+
+impl TargetSpec {
+    pub fn from_hint(h: &OperatorHint) -> Self {
+        Self {
+            source: TargetSource::Hint,
+            left_px: h.left_px.clone(),
+            right_px: h.right_px.clone(),
+            depth_m: h.depth_mm * 1e-3,
+            site_px: None,
+            site_template: None,
+            grasp_tool_z_m: None,
+        }
+    }
+}
+
+/// The target and its fall-backs; owned by the mission, set by the plan phase (or the hint
+/// at start-up), used by acquire target, servo and grasp.
+#[derive(Debug, Default)]
+pub struct Targeting {
+    /// What to grasp: set from the hint at start-up, or by the plan phase.
+    target: Option<TargetSpec>,
+    /// The operator's indicated point on the working plane, robot frame, m.
+    indicated_m: Option<[f64; 3]>,
+    /// The plan's other grasp sites near the indicated point, next best first: tried in turn
+    /// when the target trackers cannot hold the chosen facet or it turns out not vertical.
+    alternatives: Vec<TargetSpec>,
+    /// Targets tried (1 when the first one served).
+    attempts: u32,
+}
+
+impl Targeting {
+    /// The hint's facet is the target from the start; without one the plan chooses it.
+    pub fn new(hint: Option<&OperatorHint>) -> Self {
+        Self { target: hint.map(TargetSpec::from_hint), ..Self::default() }
+    }
+
+    pub fn target(&self) -> Option<&TargetSpec> {
+        self.target.as_ref()
+    }
+
+    pub fn target_mut(&mut self) -> Option<&mut TargetSpec> {
+        self.target.as_mut()
+    }
+
+    pub fn source(&self) -> Option<TargetSource> {
+        self.target.as_ref().map(|t| t.source)
+    }
+
+    pub fn set_target(&mut self, target: TargetSpec) {
+        self.target = Some(target);
+    }
+
+    /// The plan's other grasp sites, next best first.
+    pub fn set_alternatives(&mut self, alternatives: Vec<TargetSpec>) {
+        self.alternatives = alternatives;
+    }
+
+    /// Makes the next alternative the target; `false` when none is left.
+    pub fn advance(&mut self) -> bool {
+        if self.alternatives.is_empty() {
+            return false;
+        }
+        self.target = Some(self.alternatives.remove(0));
+        true
+    }
+
+    pub fn alternatives_left(&self) -> usize {
+        self.alternatives.len()
+    }
+
+    pub fn indicated_m(&self) -> Option<[f64; 3]> {
+        self.indicated_m
+    }
+
+    pub fn set_indicated_m(&mut self, point_m: Option<[f64; 3]>) {
+        self.indicated_m = point_m;
+    }
+
+    /// One more target is being acquired.
+    pub fn begin_attempt(&mut self) {
+        self.attempts += 1;
+    }
+
+    pub fn attempts(&self) -> u32 {
+        self.attempts
+    }
+}
