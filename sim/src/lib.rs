@@ -12,7 +12,6 @@ pub mod hint;
 pub mod judge;
 pub mod kinematics;
 pub mod render;
-pub mod rng;
 pub mod run;
 pub mod scenario;
 pub mod scene;

@@ -6,7 +6,7 @@ use rapier3d::prelude::*;
 
 use crate::arm::{self, Arm, groups};
 use crate::geometry::BlockShape;
-use crate::rng::SplitMix64;
+use handeye_vision::rng::SplitMix64;
 use crate::scenario::{BlockConfig, Scenario};
 
 /// Contact stiffness (natural frequency, Hz) and damping ratio between dynamic bodies; twice
@@ -111,7 +111,7 @@ fn insert_block(physics: &mut PhysicsWorld, scenario: &Scenario, index: usize, b
     let rest_z_m = size.z / 2.0;
     let shades = match &b.shades {
         Some(s) => s.clone(),
-        None => random_shades(b.shade_seed.unwrap_or_else(|| crate::rng::mix64(scenario.seed ^ (index as u64 + 1))), shape.faces.len()),
+        None => random_shades(b.shade_seed.unwrap_or_else(|| handeye_vision::rng::mix64(scenario.seed ^ (index as u64 + 1))), shape.faces.len()),
     };
     let rot = DQuat::from_rotation_z(b.yaw_deg.to_radians());
     let body = physics.insert_body(

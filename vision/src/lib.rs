@@ -7,6 +7,7 @@ pub mod grasp;
 pub mod image;
 pub mod locate;
 pub mod pointing;
+pub mod rng;
 pub mod servo;
 pub mod tracker;
 pub mod planner;

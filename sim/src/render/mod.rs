@@ -16,7 +16,7 @@ use glam::DAffine3;
 
 use crate::camera::Camera;
 use crate::events::Lighting;
-use crate::rng::mix64;
+use handeye_vision::rng::mix64;
 use crate::scene::Scene;
 use gpu::{Gpu, GpuVertex, PostUniform, ViewUniform};
 

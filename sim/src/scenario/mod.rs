@@ -356,7 +356,7 @@ impl Scenario {
     /// so that seeds give different block poses around the scenario's.
     pub fn randomise_target(&mut self, seed: u64) {
         self.seed = seed;
-        let mut rng = crate::rng::SplitMix64::new(crate::rng::mix64(seed ^ 0x504f_5345));
+        let mut rng = handeye_vision::rng::SplitMix64::new(handeye_vision::rng::mix64(seed ^ 0x504f_5345));
         let mut u = || 2.0 * rng.next_f64() - 1.0;
         let t = self.target_index();
         let b = &mut self.blocks[t];
@@ -405,7 +405,7 @@ impl Scenario {
     /// draw, whatever it hides).
     fn randomise_layout_drawing(&mut self, seed: u64, yaw_draws: usize) -> bool {
         self.seed = seed;
-        let mut rng = crate::rng::SplitMix64::new(crate::rng::mix64(seed ^ 0x4c41_594f_5554));
+        let mut rng = handeye_vision::rng::SplitMix64::new(handeye_vision::rng::mix64(seed ^ 0x4c41_594f_5554));
         let radius = |b: &BlockConfig| 0.5e-3 * b.size_mm[0].hypot(b.size_mm[1]);
         // Up to 200 attempts at the whole layout, each placing the blocks in turn.
         for _ in 0..200 {
@@ -503,7 +503,7 @@ fn least_edge_contrast(b: &BlockConfig, index: usize, seed: u64, light: &Light, 
     let shape = crate::geometry::BlockShape::new(b.kind, DVec3::from_array(b.size_mm) * 1e-3);
     let shades = match &b.shades {
         Some(s) => s.clone(),
-        None => crate::world::random_shades(b.shade_seed.unwrap_or_else(|| crate::rng::mix64(seed ^ (index as u64 + 1))), shape.faces.len()),
+        None => crate::world::random_shades(b.shade_seed.unwrap_or_else(|| handeye_vision::rng::mix64(seed ^ (index as u64 + 1))), shape.faces.len()),
     };
     let towards = DVec3::from_array(light.direction).normalize_or_zero();
     let grey = |albedo: f64, n: DVec3| (albedo * (light.ambient + light.intensity * n.dot(towards).max(0.0))).clamp(0.0, 1.0);

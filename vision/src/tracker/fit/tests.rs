@@ -184,13 +184,8 @@ fn every_association_path_gives_the_same_choices_residuals_and_histogram() {
     // Random points and candidates (some slots empty, some tied), a random motion: the
     // four-lane, the eight-lane (where the processor has it) and the one-at-a-time
     // association must agree bit for bit.
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = crate::rng::SplitMix64::new(0x9e37_79b9_7f4a_7c15);
+    let mut next = || rng.next_f64();
     let n = 61;
     let (px, py): (Vec<f64>, Vec<f64>) = (0..n).map(|_| (next() * 200.0 - 100.0, next() * 120.0 - 60.0)).unzip();
     let sides = [
