@@ -10,4 +10,5 @@ pub mod pointing;
 pub mod rng;
 pub mod servo;
 pub mod tracker;
+mod union_find;
 pub mod planner;
