@@ -27,12 +27,13 @@ use std::time::Instant;
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
 use handeye_vision::image::ImageBuf;
+use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
-pub use pixels::{edge_support, mask_and_fill, simplify_closed, tracker_order};
+pub use pixels::{edge_support, mask_and_fill};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -310,8 +311,8 @@ fn rear_edges_from_image(
             if j != k
                 && !src.hypothesised
                 && facet.component == component
-                && pixels::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
-                && pixels::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
+                && geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
+                && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
             {
                 drop[j] = true;
             }
@@ -407,8 +408,8 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             let (src, facet) = (&ps.facets[j], &ps.scene.facets[j]);
             let superseded = (hypothesised_start..ps.facets.len()).any(|k| {
                 ps.scene.facets[k].component == facet.component
-                    && pixels::covered_share(&src.left_px, &ps.facets[k].left_px) >= SUPERSEDED_SHARE
-                    && pixels::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
+                    && geom::covered_share(&src.left_px, &ps.facets[k].left_px) >= SUPERSEDED_SHARE
+                    && geom::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
             });
             if superseded {
                 summary.superseded_facets.push(src.plan_facet);
