@@ -14,6 +14,7 @@ use thiserror::Error;
 
 use super::{StereoGeometry, StereoLayout, StereoReject};
 use crate::domain::WireNode;
+use crate::liveness::{create_publisher, PublisherSlotError};
 use crate::services::{event_id, open_event_service, service_name, OpenError, STEREO_SIZING};
 use crate::types::{monotonic_ns, service, StereoHeader};
 
@@ -140,8 +141,7 @@ impl StereoPublisher {
         }
         let service = open_stereo_service(node)?;
         let events = open_event_service(node, service::STEREO, &STEREO_SIZING)?;
-        let start = Instant::now();
-        let publisher = loop {
+        let create = || {
             let mut builder = service
                 .publisher_builder()
                 .initial_max_slice_len(max_payload)
@@ -152,23 +152,16 @@ impl StereoPublisher {
                 // every subscriber has released the frame in it. `flush` loans them all at once.
                 builder = builder.max_loaned_samples(in_flight).override_sample_preallocation(move |_| in_flight);
             }
-            match builder.create() {
-                Ok(p) => break p,
-                Err(iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers) => {
-                    // Maybe a publisher that was just killed: clean it up and retry a little.
-                    service.try_cleanup_dead_nodes();
-                    if start.elapsed() >= options.create_timeout || !node.sleep(Duration::from_millis(50)) {
-                        return Err(StereoPublisherError::PublisherSlotTaken {
-                            service: service::STEREO,
-                            domain: node.domain().to_string(),
-                        });
-                    }
-                }
-                Err(e) => {
-                    return Err(StereoPublisherError::Port { port: "publisher", service: service::STEREO, detail: format!("{e:?}") });
-                }
-            }
+            builder.create()
         };
+        let publisher = create_publisher(node, &service, options.create_timeout, create).map_err(|e| match e {
+            PublisherSlotError::Taken => {
+                StereoPublisherError::PublisherSlotTaken { service: service::STEREO, domain: node.domain().to_string() }
+            }
+            PublisherSlotError::Create(e) => {
+                StereoPublisherError::Port { port: "publisher", service: service::STEREO, detail: format!("{e:?}") }
+            }
+        })?;
         let notifier = events
             .notifier_builder()
             .default_event_id(EventId::new(event_id::SAMPLE))
