@@ -72,9 +72,9 @@ pub struct Placement {
     pub width_px: f64,
 }
 
-/// What moved between the two frames.
+/// What moved in the image between the two frames (not a robot motion: pixels).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Motion {
+pub struct ImageMotion {
     /// Kept regions, largest first.
     pub blobs: Vec<Blob>,
     pub placement: Placement,
@@ -156,7 +156,7 @@ fn morph(src: &[bool], dst: &mut [bool], tmp: &mut [bool], w: usize, h: usize, g
 
 /// Finds what moved between `open` and `closed` (any order) and where the gripper template
 /// should go.
-pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &LocateConfig) -> Result<Motion, LocateError> {
+pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &LocateConfig) -> Result<ImageMotion, LocateError> {
     if !(config.noise_sigmas > 0.0 && config.noise_sigmas.is_finite()) {
         return Err(LocateError::Config { field: "noise_sigmas" });
     }
@@ -248,7 +248,7 @@ pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &Loca
     }
     blobs.sort_by_key(|b| std::cmp::Reverse(b.area_px));
     let (centre_px, axis_rad, length_px, width_px) = all.shape();
-    Ok(Motion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
+    Ok(ImageMotion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
 }
 
 #[cfg(test)]

@@ -28,7 +28,7 @@ use handeye_vision::affine::AffineStereo;
 use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
-use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
+use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
@@ -216,7 +216,7 @@ fn project(model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64;
 
 /// Projects a scene point through the pinhole cameras when there are any (planner pixels in,
 /// tracker pixels out), else through the affine model.
-fn project_scene(geo: &StereoGeometry, model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
+fn project_scene(geo: &EpipolarGeometry, model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
     let Some(cams) = &geo.projective else { return project(model, lever_m, p) };
     let h = p.push(1.0);
     let at = |cam: &nalgebra::Matrix3x4<f64>| {
@@ -359,7 +359,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let lever = Vector3::from(req.lever_m);
     let points: Vec<Vector3<f64>> = req.cage_robot_m.iter().map(|x| x - lever).collect();
     let images: Vec<[f64; 4]> = req.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
-    let mut geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
+    let mut geo = EpipolarGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
     }

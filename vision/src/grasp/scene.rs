@@ -309,7 +309,7 @@ mod tests {
     use crate::affine::AffineStereo;
     use crate::grasp::{plan_grasps, GraspConfig};
     use crate::planner::synth::{BoxSpec, SynthScene};
-    use crate::planner::{Planner, PlannerConfig, StereoGeometry};
+    use crate::planner::{Planner, PlannerConfig, EpipolarGeometry};
 
     fn plan_scene(boxes: Vec<BoxSpec>, seed: u64) -> (PlannedScene, Plan) {
         let synth = SynthScene::new(boxes);
@@ -318,7 +318,7 @@ mod tests {
         let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
         let model = AffineStereo::fit(&robot, &image).unwrap();
         let toward = model.toward_cameras();
-        let geo = StereoGeometry::from_model(model, 0.5, 10.0);
+        let geo = EpipolarGeometry::from_model(model, 0.5, 10.0);
         let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
         (scene_from_plan(&plan, toward, 1.0, 0.004), plan)
     }
@@ -405,7 +405,7 @@ mod tests {
         let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
         let model = AffineStereo::fit(&robot, &image).unwrap();
         let toward = model.toward_cameras();
-        let geo = StereoGeometry::from_model(model.clone(), 0.5, 10.0);
+        let geo = EpipolarGeometry::from_model(model.clone(), 0.5, 10.0);
         let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
         let full = scene_from_plan(&plan, toward, 1.0, 0.004);
         let mut ps = full.clone();

@@ -4,7 +4,7 @@
 
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
-use super::{AffineFrame, StereoPoint};
+use super::{ViewFrame, StereoPoint};
 
 /// A pinhole camera: `x` right, `y` down, `z` forward; pixels.
 #[derive(Debug, Clone, Copy)]
@@ -74,7 +74,7 @@ pub(crate) fn cage() -> Vec<Vector3<f64>> {
 
 /// Least-squares affine frame `o + s e1 + t e2` through image points with known `(s, t)`:
 /// what an affine contour tracker converges to on a perspective image of a polygon.
-pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> AffineFrame {
+pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> ViewFrame {
     let mut ata = Matrix3::zeros();
     let mut atx = nalgebra::Matrix3x2::zeros();
     for (p, c) in points.iter().zip(st) {
@@ -83,5 +83,5 @@ pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> AffineFrame {
         atx += a * nalgebra::RowVector2::new(p[0], p[1]);
     }
     let sol = ata.try_inverse().expect("frame points span a plane") * atx;
-    AffineFrame { o: [sol[(0, 0)], sol[(0, 1)]], e1: [sol[(1, 0)], sol[(1, 1)]], e2: [sol[(2, 0)], sol[(2, 1)]] }
+    ViewFrame { o: [sol[(0, 0)], sol[(0, 1)]], e1: [sol[(1, 0)], sol[(1, 1)]], e2: [sol[(2, 0)], sol[(2, 1)]] }
 }

@@ -65,7 +65,7 @@ impl Pose {
         self.reference() + self.a() * ab[0] + Vector3::z() * ab[1]
     }
     /// The servo's motion: the reference point translated, the yaw turned about it.
-    fn apply(&mut self, m: &Motion) {
+    fn apply(&mut self, m: &ToolMotion) {
         let r = self.reference() + m.translation_m;
         self.yaw += m.yaw_rad;
         self.tool = r + self.lever();
@@ -187,7 +187,7 @@ pub(super) fn run_pick(p: &Pick) -> PickOutcome {
     let st = template_st(&left);
     // The target as a tracker reports it, averaged over `k` frames.
     let observe = |rng: &mut SplitMix64, k: usize| {
-        let mut mean = [AffineFrame::default(); 2];
+        let mut mean = [ViewFrame::default(); 2];
         for _ in 0..k {
             for (m, corners) in mean.iter_mut().zip([&left, &right]) {
                 let noisy: Vec<[f64; 2]> = corners.iter().map(|c| [c[0] + p.noise_px * rng.normal(), c[1] + p.noise_px * rng.normal()]).collect();

@@ -166,7 +166,7 @@ fn jacobian_matches_finite_differences_for_affine_cameras() {
     let k = facet.corners();
     let frame = |pick: fn(&StereoPoint) -> [f64; 2]| {
         let (o, a, b) = (pick(&project(&k[0])), pick(&project(&k[1])), pick(&project(&k[3])));
-        AffineFrame { o, e1: [a[0] - o[0], a[1] - o[1]], e2: [b[0] - o[0], b[1] - o[1]] }
+        ViewFrame { o, e1: [a[0] - o[0], a[1] - o[1]], e2: [b[0] - o[0], b[1] - o[1]] }
     };
     let target = StereoFrame { left: frame(|p| p.left), right: frame(|p| p.right) };
     let view = |pose: &Pose| {
@@ -279,7 +279,7 @@ fn a_wrong_sign_model_diverges_and_the_failure_sticks() {
     let failed = loop {
         let s = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
         if let StepOutcome::Failed(f) = s.outcome {
-            assert_eq!(s.motion, Motion::default());
+            assert_eq!(s.motion, ToolMotion::default());
             break (f, s.step);
         }
         pose.apply(&s.motion);
@@ -290,7 +290,7 @@ fn a_wrong_sign_model_diverges_and_the_failure_sticks() {
     // Failed stays failed, with no motion, until reset.
     let again = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
     assert_eq!(failure(&again), failed.0);
-    assert_eq!(again.motion, Motion::default());
+    assert_eq!(again.motion, ToolMotion::default());
     servo.reset();
     assert_eq!(servo.steps(), 0);
     assert_eq!(servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal).outcome, StepOutcome::Move);

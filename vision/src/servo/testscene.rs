@@ -113,7 +113,7 @@ impl Pose {
         Vector3::new(self.yaw_rad.cos(), self.yaw_rad.sin(), 0.0)
     }
 
-    pub(super) fn apply(&mut self, m: &Motion) {
+    pub(super) fn apply(&mut self, m: &ToolMotion) {
         self.tool_m += m.translation_m;
         self.yaw_rad += m.yaw_rad;
     }
@@ -142,7 +142,7 @@ pub(super) fn noisy(p: [f64; 2], rng: &mut SplitMix64, noise_px: f64) -> [f64; 2
 /// What an affine contour tracker reports for a planar quadrilateral: the least-squares
 /// affine frame of `CONTOUR_POINTS` points around its outline, each seen with uniform
 /// `±noise_px` error per coordinate.
-pub(super) fn track(cam: &PinholeCamera, at_st: impl Fn(&[f64; 2]) -> Vector3<f64>, rng: &mut SplitMix64, noise_px: f64) -> AffineFrame {
+pub(super) fn track(cam: &PinholeCamera, at_st: impl Fn(&[f64; 2]) -> Vector3<f64>, rng: &mut SplitMix64, noise_px: f64) -> ViewFrame {
     let st = outline_st(CONTOUR_POINTS);
     let pts: Vec<[f64; 2]> = st.iter().map(|c| noisy(cam.project(&at_st(c)), rng, noise_px)).collect();
     fit_frame(&pts, &st)
