@@ -5,13 +5,13 @@
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::planner::score::{median, score_scene, FacetPolygons, ScoreConfig, SceneScore};
 use handeye_vision::planner::synth::{BoxSpec, StereoPair, SynthScene};
-use handeye_vision::planner::{geom, Plan, Planner, PlannerConfig, StereoGeometry};
+use handeye_vision::planner::{geom, Plan, Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::Vector3;
 
-fn geometry(pair: &StereoPair) -> StereoGeometry {
+fn geometry(pair: &StereoPair) -> EpipolarGeometry {
     let robot: Vec<Vector3<f64>> = pair.cage.iter().map(|c| Vector3::from(c.0)).collect();
     let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
-    StereoGeometry::from_model(AffineStereo::fit(&robot, &image).expect("cage fit"), 0.5, 10.0)
+    EpipolarGeometry::from_model(AffineStereo::fit(&robot, &image).expect("cage fit"), 0.5, 10.0)
 }
 
 fn score(plan: &Plan, pair: &StereoPair) -> SceneScore {

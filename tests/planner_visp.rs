@@ -15,7 +15,7 @@ use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::edges::{EdgeConfig, EdgeDetector};
 use handeye_vision::planner::geom::{self, P2};
 use handeye_vision::planner::segments::{SegmentConfig, SegmentDetector};
-use handeye_vision::planner::{Plan, Planner, PlannerConfig, StereoGeometry};
+use handeye_vision::planner::{Plan, Planner, PlannerConfig, EpipolarGeometry};
 use serde_json::Value;
 
 fn load(path: &Path) -> ImageBuf {
@@ -81,7 +81,7 @@ fn plan_frames_0_and_40() -> Option<Pair0And40> {
     let dir = data_support::visp_cube(&["image0000.png", "image0040.png"])?;
     let f0 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame0.json")));
     let f40 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame40.json")));
-    let geo = StereoGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
+    let geo = EpipolarGeometry::from_correspondences(&correspondences(&f0, &f40), 0.5, 10.0).expect("epipolar constraint from the corners");
     let (left, right) = (load(&dir.join("image0000.png")), load(&dir.join("image0040.png")));
     let plan = Planner::new(PlannerConfig::default()).plan(&left.view(), &right.view(), &geo);
     Some(Pair0And40 { f0, f40, left, plan })
@@ -135,7 +135,7 @@ fn frames_0_and_20_have_no_parallax_so_no_stereo_geometry() {
     let f20 = faces(&json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/visp-cube-faces-frame20.json")));
     // The corners annotated in frame 20 are frame 0's: the correspondences span only two
     // dimensions of (u, v, u', v') space, and no epipolar constraint can be fitted.
-    let err = StereoGeometry::from_correspondences(&correspondences(&f0, &f20), 0.5, 10.0).expect_err("degenerate");
+    let err = EpipolarGeometry::from_correspondences(&correspondences(&f0, &f20), 0.5, 10.0).expect_err("degenerate");
     assert!(matches!(err, FitError::Degenerate(_)), "{err:?}");
     // Not an annotation artefact: every long edge near the cube lies within 0.5 px of a
     // parallel edge of frame 20.

@@ -6,7 +6,7 @@ mod wire_support;
 use std::time::Duration;
 
 use handeye_wire::checksum::PixelChecksum;
-use handeye_wire::stereo::{Delivery, StereoGeometry, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::stereo::{Delivery, StereoFormat, StereoPublisher, StereoPublisherOptions};
 use handeye_wire::{StereoHeader, WireNode, WIRE_VERSION};
 use wire_support::*;
 
@@ -18,7 +18,7 @@ fn each_malformed_sample_is_rejected_with_its_reason_and_the_monitor_keeps_worki
     let monitor = Proc::spawn("monitor", mon_cmd);
 
     let node = WireNode::create(&domain.0, "bad-camera").unwrap();
-    let geometry = StereoGeometry::gray8_pair(32, 16);
+    let geometry = StereoFormat::gray8_pair(32, 16);
     let len = 32 * 16 * 2;
     // Lossless: every sample waits until the monitor has taken the previous one, so none is
     // lost to queue overflow and every counter must come out exact.

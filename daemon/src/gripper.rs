@@ -4,8 +4,8 @@
 //! trackers into the servo's [`GripperView`] and [`StereoFrame`].
 
 use handeye_vision::image::ImageView;
-use handeye_vision::locate::Motion;
-use handeye_vision::servo::{AffineFrame, GripperView, StereoFrame, StereoPoint};
+use handeye_vision::locate::ImageMotion;
+use handeye_vision::servo::{ViewFrame, GripperView, StereoFrame, StereoPoint};
 use handeye_vision::tracker::ContourTracker;
 use nalgebra::{Vector2, Vector3};
 
@@ -104,7 +104,7 @@ pub fn gripper_view(plate: &PlateTemplate, left: &ContourTracker, right: &Contou
 /// derivative at the centre, and the plane transfer the servo builds from the two views'
 /// frames is extrapolated far (to the gripper plate), so its steadiness is what counts.
 /// No allocation (corners are accumulated on the fly).
-pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
+pub fn facet_frame(t: &ContourTracker) -> ViewFrame {
     // Normal equations of p = o + E q over the corners, centred.
     let (mut n, mut qm, mut pm) = (0.0, Vector2::zeros(), Vector2::zeros());
     for (q, p) in t.template().corners().iter().zip(t.corners()) {
@@ -113,7 +113,7 @@ pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
         pm += p;
     }
     if n < 3.0 {
-        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+        return ViewFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
     }
     qm /= n;
     pm /= n;
@@ -124,11 +124,11 @@ pub fn facet_frame(t: &ContourTracker) -> AffineFrame {
         pq += dp * dq.transpose();
     }
     let Some(inv) = qq.try_inverse() else {
-        return AffineFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
+        return ViewFrame { o: at(t, [0.0, 0.0]), e1: direction(t, [0.0, 0.0], [1.0, 0.0], 0.25), e2: direction(t, [0.0, 0.0], [0.0, 1.0], 0.25) };
     };
     let e = pq * inv;
     let o = pm - e * qm;
-    AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] }
+    ViewFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] }
 }
 
 /// A facet's frames in both views, in *shared* coordinates: each view's frame is the
@@ -149,7 +149,7 @@ pub fn stereo_frame(left: &ContourTracker, right: &ContourTracker) -> StereoFram
 
 /// The least-squares affine frame `p = o + E q` through template points `q` and image points
 /// `p`, or `None` when the `q` span no plane.
-fn frame_through<I: Iterator<Item = Vector2<f64>>>(q: &[Vector2<f64>], p: impl Fn() -> I) -> Option<AffineFrame> {
+fn frame_through<I: Iterator<Item = Vector2<f64>>>(q: &[Vector2<f64>], p: impl Fn() -> I) -> Option<ViewFrame> {
     let n = q.len() as f64;
     let qm = q.iter().sum::<Vector2<f64>>() / n;
     let pm = p().sum::<Vector2<f64>>() / n;
@@ -164,7 +164,7 @@ fn frame_through<I: Iterator<Item = Vector2<f64>>>(q: &[Vector2<f64>], p: impl F
     }
     let e = pq * qq.try_inverse()?;
     let o = pm - e * qm;
-    Some(AffineFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] })
+    Some(ViewFrame { o: [o.x, o.y], e1: [e[(0, 0)], e[(1, 0)]], e2: [e[(0, 1)], e[(1, 1)]] })
 }
 
 /// Why the plate was not found next to the moving fingers.
@@ -182,7 +182,7 @@ pub enum PlateError {
 /// rectangle), the largest fairly rectangular one above the fingers. Returns its corners,
 /// top-left, top-right, bottom-right, bottom-left (the extreme points along the diagonals,
 /// pushed half a pixel out to the region's boundary). Allocates: run it off the hard loop.
-pub fn find_plate(image: &ImageView<'_>, motion: &Motion) -> Result<[[f64; 2]; 4], PlateError> {
+pub fn find_plate(image: &ImageView<'_>, motion: &ImageMotion) -> Result<[[f64; 2]; 4], PlateError> {
     if motion.blobs.is_empty() {
         return Err(PlateError::NoMotion);
     }
@@ -406,7 +406,7 @@ mod tests {
             }
         }
         let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
-        let motion = Motion {
+        let motion = ImageMotion {
             blobs: vec![blob],
             placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
             threshold: 12,

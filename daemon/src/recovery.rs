@@ -11,7 +11,7 @@
 //! Allocates (tracker clones per candidate): it runs only while the arm is stopped.
 
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{AffineFrame, ContourTracker, Role, StereoTrackerSet, View};
+use handeye_vision::tracker::{TemplateFrame, ContourTracker, Role, StereoTrackerSet, View};
 use nalgebra::Vector2;
 
 /// Largest view shift searched for, px (a 3° pan at f = 1800 px is ~94 px).
@@ -29,8 +29,8 @@ pub const CONFIRM_FRAMES: u32 = 12;
 pub struct Recovery {
     pub view: View,
     pub start_frame: u64,
-    gripper_frame: AffineFrame,
-    target_frame: AffineFrame,
+    gripper_frame: TemplateFrame,
+    target_frame: TemplateFrame,
     candidates: Vec<Vector2<f64>>,
     next: usize,
     best: Option<(f64, Vector2<f64>)>,
@@ -72,8 +72,8 @@ impl Recovery {
         Some(Self { view, start_frame: frame_index, gripper_frame: g, target_frame: t, candidates, next: 0, best: None, confirmed: None })
     }
 
-    fn shifted(f: &AffineFrame, d: Vector2<f64>) -> AffineFrame {
-        AffineFrame::new(f.origin + d, f.e1, f.e2)
+    fn shifted(f: &TemplateFrame, d: Vector2<f64>) -> TemplateFrame {
+        TemplateFrame::new(f.origin + d, f.e1, f.e2)
     }
 
     /// One cycle on `image` (the moved view).

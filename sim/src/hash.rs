@@ -1,7 +1,7 @@
 //! A fast, stable 64-bit hash over published pixels (`frames_hash` in `handeye sim --json`),
 //! for checking that two runs published bit-identical frames. Not cryptographic.
 
-use crate::rng::mix64;
+use handeye_vision::rng::mix64;
 
 /// Hash of one buffer: 8 bytes at a time through a multiply-xorshift, then the tail.
 pub fn hash_bytes(bytes: &[u8]) -> u64 {

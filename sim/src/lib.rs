@@ -23,7 +23,6 @@ pub mod events;
 pub mod hash;
 pub mod referee;
 pub mod render;
-pub mod rng;
 pub mod run;
 pub mod scenario;
 pub mod simulator;

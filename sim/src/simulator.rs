@@ -156,7 +156,7 @@ impl Simulator {
             lighting: &self.events.lighting,
             background: self.scenario.render.background,
             sensors: self.sensors(),
-            noise_seed: crate::rng::mix64(self.scenario.seed) ^ self.frames,
+            noise_seed: handeye_vision::rng::mix64(self.scenario.seed) ^ self.frames,
         }
     }
 

@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
-use handeye_wire::stereo::{Delivery, StereoGeometry, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::stereo::{Delivery, StereoFormat, StereoPublisher, StereoPublisherOptions};
 use handeye_wire::{Domain, RobotCommand, RobotState, Telemetry, WireNode, monotonic_ns};
 
 use crate::render::RenderError;
@@ -35,14 +35,14 @@ pub struct WireTransport {
     /// Commands taken out of the subscriber while waiting, not yet handed over.
     pending: VecDeque<RobotCommand>,
     node: WireNode,
-    geometry: StereoGeometry,
+    geometry: StereoFormat,
 }
 
 impl WireTransport {
     /// Joins `domain` as the camera pair (`width` x `height` GRAY8 views) and the robot.
     pub fn new(domain: &Domain, width: u32, height: u32) -> Result<Self, TransportError> {
         let node = WireNode::create(domain, "handeye-sim")?;
-        let geometry = StereoGeometry::gray8_pair(width, height);
+        let geometry = StereoFormat::gray8_pair(width, height);
         // Latest-frame delivery, like a camera: in lockstep the simulator waits for the
         // daemon's reply to each frame anyway, so the daemon never falls behind.
         let frames = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery: Delivery::Latest, ..Default::default() })?;

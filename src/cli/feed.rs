@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
-use handeye_wire::stereo::{Delivery, PublishError, StereoGeometry, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::stereo::{Delivery, PublishError, StereoFormat, StereoPublisher, StereoPublisherOptions};
 use handeye_wire::{monotonic_ns, WireNode};
 
 use super::domain::DomainArgs;
@@ -176,7 +176,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
     let seq = load_sequence(&args.dir, args.mono)?;
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-feed")?;
-    let geometry = StereoGeometry::gray8_pair(seq.width, seq.height);
+    let geometry = StereoFormat::gray8_pair(seq.width, seq.height);
     let wait = Duration::from_secs_f64(args.wait_subscriber_s);
     let lossless = args.rate_hz == 0.0;
     let delivery = if lossless {

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::image::ImageBuf;
-use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, StereoGeometry};
+use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, EpipolarGeometry};
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use serde_json::{json, Value};
 
@@ -114,7 +114,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
         );
     }
     let (geo, source) = match (&args.calib, &args.points) {
-        (Some(c), _) => (StereoGeometry::from_model(load_calib(c)?, args.disparity_margin, args.disparity_margin_px), "calibration"),
+        (Some(c), _) => (EpipolarGeometry::from_model(load_calib(c)?, args.disparity_margin, args.disparity_margin_px), "calibration"),
         (None, Some(p)) => geometry_from_points(&load_points(p)?, args.disparity_margin, args.disparity_margin_px, p)?,
         (None, None) => bail!("give --calib or --points"),
     };
@@ -143,7 +143,7 @@ pub fn run(args: PlanArgs) -> Result<()> {
 }
 
 /// Runs the planner, returning per-stage times (milliseconds, stage name → time) and `total`.
-pub fn timed_plan(planner: &mut Planner, left: &ImageBuf, right: &ImageBuf, geo: &StereoGeometry) -> (Plan, BTreeMap<&'static str, f64>) {
+pub fn timed_plan(planner: &mut Planner, left: &ImageBuf, right: &ImageBuf, geo: &EpipolarGeometry) -> (Plan, BTreeMap<&'static str, f64>) {
     let mut timings: BTreeMap<&'static str, f64> = Stage::ALL.iter().map(|s| (s.name(), 0.0)).collect();
     let start = Instant::now();
     let mut last = start;
@@ -299,11 +299,11 @@ fn load_point_list(v: &Value, path: &Path) -> Result<Vec<Correspondence>> {
 /// Stereo geometry from correspondences: the affine model (and, from >= 6 non-coplanar
 /// points, the pinhole cameras) when all have robot coordinates, else the epipolar
 /// constraint alone.
-pub fn geometry_from_points(points: &[Correspondence], margin: f64, margin_px: f64, path: &Path) -> Result<(StereoGeometry, &'static str)> {
+pub fn geometry_from_points(points: &[Correspondence], margin: f64, margin_px: f64, path: &Path) -> Result<(EpipolarGeometry, &'static str)> {
     let image: Vec<[f64; 4]> = points.iter().map(|p| p.0).collect();
     if points.iter().all(|p| p.1.is_some()) {
         let robot: Vec<Vector3<f64>> = points.iter().filter_map(|p| p.1).map(Vector3::from).collect();
-        let geo = StereoGeometry::from_calibration_points(&robot, &image, margin, margin_px).with_context(|| format!("{}: cannot fit the affine stereo model", path.display()))?;
+        let geo = EpipolarGeometry::from_calibration_points(&robot, &image, margin, margin_px).with_context(|| format!("{}: cannot fit the affine stereo model", path.display()))?;
         let source = if geo.projective.is_some() {
             "points with robot coordinates (affine model; pinhole cameras for the robot coordinates)"
         } else {
@@ -311,7 +311,7 @@ pub fn geometry_from_points(points: &[Correspondence], margin: f64, margin_px: f
         };
         Ok((geo, source))
     } else {
-        let geo = StereoGeometry::from_correspondences(&image, margin, margin_px).with_context(|| format!("{}: cannot fit the epipolar constraint", path.display()))?;
+        let geo = EpipolarGeometry::from_correspondences(&image, margin, margin_px).with_context(|| format!("{}: cannot fit the epipolar constraint", path.display()))?;
         Ok((geo, "image correspondences (epipolar constraint only)"))
     }
 }
@@ -329,7 +329,7 @@ fn pts3(p: &[[f64; 3]], scale: f64) -> Value {
 }
 
 /// The `--json` object.
-pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &StereoGeometry, source: &str) -> Value {
+pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &EpipolarGeometry, source: &str) -> Value {
     let facets: Vec<Value> = plan
         .facets
         .iter()

@@ -9,7 +9,7 @@ use std::process::Command;
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::geom::{self, P2};
-use handeye_vision::planner::{Plan, StereoGeometry};
+use handeye_vision::planner::{Plan, EpipolarGeometry};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
@@ -172,10 +172,10 @@ impl Snapshot {
 
     /// The planner's stereo geometry from the cage, as `handeye plan --points cage.json`
     /// fits it: the affine model and the pinhole cameras.
-    pub fn geometry(&self, margin_frac: f64, margin_px: f64) -> StereoGeometry {
+    pub fn geometry(&self, margin_frac: f64, margin_px: f64) -> EpipolarGeometry {
         let robot: Vec<Vector3<f64>> = self.cage.iter().map(|c| Vector3::from(c.0)).collect();
         let image: Vec<[f64; 4]> = self.cage.iter().map(|c| c.1).collect();
-        StereoGeometry::from_calibration_points(&robot, &image, margin_frac, margin_px).expect("cage fit")
+        EpipolarGeometry::from_calibration_points(&robot, &image, margin_frac, margin_px).expect("cage fit")
     }
 }
 

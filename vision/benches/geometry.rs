@@ -8,7 +8,7 @@ use handeye_vision::grasp::{plan_grasps, GraspConfig, GraspScene, SceneFacet, Se
 use handeye_vision::image::ImageBuf;
 use handeye_vision::locate::{locate_moving, LocateConfig};
 use handeye_vision::pointing::{ImageLine, PlaneHomography, Pointing};
-use handeye_vision::servo::{AffineFrame, CoplanarityServo, GripperView, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoFrame, StereoPoint};
+use handeye_vision::servo::{ViewFrame, CoplanarityServo, GripperView, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoFrame, StereoPoint};
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use std::hint::black_box;
 
@@ -24,8 +24,8 @@ fn servo_step(c: &mut Criterion) {
         let (po, pa, pb) = (project(o), project(o + a), project(o + b));
         let d = |p: [f64; 2], q: [f64; 2]| [q[0] - p[0], q[1] - p[1]];
         StereoFrame {
-            left: AffineFrame { o: po.left, e1: d(po.left, pa.left), e2: d(po.left, pb.left) },
-            right: AffineFrame { o: po.right, e1: d(po.right, pa.right), e2: d(po.right, pb.right) },
+            left: ViewFrame { o: po.left, e1: d(po.left, pa.left), e2: d(po.left, pb.left) },
+            right: ViewFrame { o: po.right, e1: d(po.right, pa.right), e2: d(po.right, pb.right) },
         }
     };
     let target = frame(Vector3::new(0.5, 0.0, 0.04), Vector3::new(0.0, 0.04, 0.0), Vector3::new(0.0, 0.0, -0.04));

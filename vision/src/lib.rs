@@ -7,6 +7,8 @@ pub mod grasp;
 pub mod image;
 pub mod locate;
 pub mod pointing;
+pub mod rng;
 pub mod servo;
 pub mod tracker;
+mod union_find;
 pub mod planner;

@@ -72,9 +72,9 @@ pub struct Placement {
     pub width_px: f64,
 }
 
-/// What moved between the two frames.
+/// What moved in the image between the two frames (not a robot motion: pixels).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Motion {
+pub struct ImageMotion {
     /// Kept regions, largest first.
     pub blobs: Vec<Blob>,
     pub placement: Placement,
@@ -156,7 +156,7 @@ fn morph(src: &[bool], dst: &mut [bool], tmp: &mut [bool], w: usize, h: usize, g
 
 /// Finds what moved between `open` and `closed` (any order) and where the gripper template
 /// should go.
-pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &LocateConfig) -> Result<Motion, LocateError> {
+pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &LocateConfig) -> Result<ImageMotion, LocateError> {
     if !(config.noise_sigmas > 0.0 && config.noise_sigmas.is_finite()) {
         return Err(LocateError::Config { field: "noise_sigmas" });
     }
@@ -248,21 +248,21 @@ pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &Loca
     }
     blobs.sort_by_key(|b| std::cmp::Reverse(b.area_px));
     let (centre_px, axis_rad, length_px, width_px) = all.shape();
-    Ok(Motion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
+    Ok(ImageMotion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::image::ImageBuf;
-    use crate::servo::testcam::Rng;
+    use crate::rng::SplitMix64;
 
     const W: usize = 640;
     const H: usize = 480;
 
     /// A cluttered static scene: a gradient and 40 random grey rectangles, away from the
     /// gripper region around (320, 215).
-    fn background(rng: &mut Rng) -> ImageBuf {
+    fn background(rng: &mut SplitMix64) -> ImageBuf {
         let mut img = ImageBuf::new(W, H);
         for y in 0..H {
             for x in 0..W {
@@ -270,12 +270,12 @@ mod tests {
             }
         }
         for _ in 0..40 {
-            let (x0, y0) = (rng.uniform(0.0, 600.0) as usize, rng.uniform(0.0, 440.0) as usize);
-            let (x1, y1) = ((x0 + rng.uniform(5.0, 60.0) as usize).min(W), (y0 + rng.uniform(5.0, 60.0) as usize).min(H));
+            let (x0, y0) = (rng.range(0.0, 600.0) as usize, rng.range(0.0, 440.0) as usize);
+            let (x1, y1) = ((x0 + rng.range(5.0, 60.0) as usize).min(W), (y0 + rng.range(5.0, 60.0) as usize).min(H));
             if x1 > 240 && x0 < 400 && y1 > 150 && y0 < 280 {
                 continue;
             }
-            let grey = rng.uniform(0.0, 255.0) as u8;
+            let grey = rng.range(0.0, 255.0) as u8;
             for y in y0..y1 {
                 for x in x0..x1 {
                     img.set(x, y, grey);
@@ -306,7 +306,7 @@ mod tests {
         (img, on)
     }
 
-    fn add_noise(img: &ImageBuf, sigma: f64, rng: &mut Rng) -> ImageBuf {
+    fn add_noise(img: &ImageBuf, sigma: f64, rng: &mut SplitMix64) -> ImageBuf {
         let mut out = img.clone();
         for v in out.data.iter_mut() {
             *v = (*v as f64 + sigma * rng.normal()).round().clamp(0.0, 255.0) as u8;
@@ -318,7 +318,7 @@ mod tests {
     /// fingers 35 px from the centre when open, 15 px when closed. Also returns where the
     /// frames truly differ (a finger in one frame and not the other).
     fn jaws(angle: f64, sigma: f64, seed: u64) -> (ImageBuf, ImageBuf, Vec<bool>) {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix64::new(seed);
         let bg = background(&mut rng);
         let (c, s) = (angle.cos(), angle.sin());
         let at = |r: f64| [[320.0 - r * c, 215.0 - r * s], [320.0 + r * c, 215.0 + r * s]];
@@ -376,13 +376,13 @@ mod tests {
 
     #[test]
     fn noise_and_speckle_alone_are_no_motion() {
-        let mut rng = Rng::new(3);
+        let mut rng = SplitMix64::new(3);
         let bg = background(&mut rng);
         let a = add_noise(&bg, 2.0, &mut rng);
         let mut b = add_noise(&bg, 2.0, &mut rng);
         // Salt: 200 isolated bright pixels (dead-pixel flicker).
         for _ in 0..200 {
-            let (x, y) = (rng.uniform(0.0, W as f64) as usize, rng.uniform(0.0, H as f64) as usize);
+            let (x, y) = (rng.range(0.0, W as f64) as usize, rng.range(0.0, H as f64) as usize);
             b.set(x, y, 255);
         }
         assert!(matches!(locate_moving(&a.view(), &b.view(), &LocateConfig::default()), Err(LocateError::NoMotion { .. })));

@@ -203,7 +203,8 @@ impl Pointing {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::servo::testcam::{cage, Rig, Rng};
+    use crate::rng::SplitMix64;
+    use crate::servo::testcam::{cage, Rig};
     use nalgebra::Vector3;
 
     const PLANE_Z_M: f64 = 0.05;
@@ -243,12 +244,12 @@ mod tests {
     fn finds_the_indicated_point_without_reconstruction() {
         let rig = Rig::standard(1500.0);
         let p = pointing(&rig);
-        let mut rng = Rng::new(4);
+        let mut rng = SplitMix64::new(4);
         let mut found = 0;
         for _ in 0..20 {
-            let target = Vector3::new(rng.uniform(0.35, 0.65), rng.uniform(-0.15, 0.15), PLANE_Z_M);
+            let target = Vector3::new(rng.range(0.35, 0.65), rng.range(-0.15, 0.15), PLANE_Z_M);
             // The hand is above and to the side of the workspace, pointing down at the target.
-            let hand = Vector3::new(rng.uniform(0.3, 0.9), rng.uniform(-0.5, 0.5), rng.uniform(0.3, 0.5));
+            let hand = Vector3::new(rng.range(0.3, 0.9), rng.range(-0.5, 0.5), rng.range(0.3, 0.5));
             let (l, r) = finger_lines(&rig, hand, target);
             match p.indicate(&l, &r) {
                 Ok(hit) => {
@@ -270,14 +271,14 @@ mod tests {
         // The hand points from the cameras' side, across the baseline: well conditioned.
         let rig = Rig::standard(1500.0);
         let p = pointing(&rig);
-        let mut rng = Rng::new(9);
+        let mut rng = SplitMix64::new(9);
         let target = Vector3::new(0.5, 0.02, PLANE_Z_M);
         let hand = Vector3::new(0.8, 0.05, 0.35);
         let tip = hand + 0.15 * (target - hand).normalize();
         let mut worst: f64 = 0.0;
         let mut crossing = 0.0;
         for _ in 0..50 {
-            let mut n = |x: [f64; 2]| [x[0] + rng.uniform(-0.3, 0.3), x[1] + rng.uniform(-0.3, 0.3)];
+            let mut n = |x: [f64; 2]| [x[0] + rng.range(-0.3, 0.3), x[1] + rng.range(-0.3, 0.3)];
             let (h, t) = (rig.project(&hand), rig.project(&tip));
             let l = ImageLine::through(&n(h.left), &n(t.left)).unwrap();
             let r = ImageLine::through(&n(h.right), &n(t.right)).unwrap();

@@ -6,7 +6,8 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use handeye_vision::image::ImageBuf;
-use handeye_vision::tracker::synth::{Rng, Scene};
+use handeye_vision::rng::SplitMix64;
+use handeye_vision::tracker::synth::Scene;
 use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
 
 struct Counting;
@@ -55,7 +56,7 @@ fn stereo_updates_and_reinit_allocate_nothing() {
     let square = [[60.0, 50.0], [130.0, 45.0], [135.0, 110.0], [55.0, 105.0]];
     let other = [[70.0, 60.0], [120.0, 58.0], [124.0, 100.0], [66.0, 98.0]];
     // Pre-render the frames so image making is outside the counted region.
-    let mut rng = Rng::new(3);
+    let mut rng = SplitMix64::new(3);
     let lefts: Vec<ImageBuf> = (0..40).map(|k| scene(0.4 * k as f64, square).render(&mut rng)).collect();
     let rights: Vec<ImageBuf> = (0..40).map(|k| scene(0.4 * k as f64 - 3.0, square).render(&mut rng)).collect();
     let config = TrackerConfig::default();

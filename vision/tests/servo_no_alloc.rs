@@ -5,7 +5,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::servo::{AffineFrame, CoplanarityServo, GripperView, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoFrame, StereoPoint};
+use handeye_vision::servo::{ViewFrame, CoplanarityServo, GripperView, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoFrame, StereoPoint};
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 
 struct Counting;
@@ -49,8 +49,8 @@ fn a_servo_run_does_not_allocate() {
         let (po, pa, pb) = (project(o), project(o + a), project(o + b));
         let d = |p: [f64; 2], q: [f64; 2]| [q[0] - p[0], q[1] - p[1]];
         StereoFrame {
-            left: AffineFrame { o: po.left, e1: d(po.left, pa.left), e2: d(po.left, pb.left) },
-            right: AffineFrame { o: po.right, e1: d(po.right, pa.right), e2: d(po.right, pb.right) },
+            left: ViewFrame { o: po.left, e1: d(po.left, pa.left), e2: d(po.left, pb.left) },
+            right: ViewFrame { o: po.right, e1: d(po.right, pa.right), e2: d(po.right, pb.right) },
         }
     };
     // Facet in the plane x = 0.5, normal +x.

@@ -4,7 +4,8 @@
 //! beyond the search range, which must end in the lost state rather than a wrong lock.
 
 use handeye_vision::image::ImageBuf;
-use handeye_vision::tracker::synth::{ClutterLine, Rng, Scene};
+use handeye_vision::rng::SplitMix64;
+use handeye_vision::tracker::synth::{ClutterLine, Scene};
 use handeye_vision::tracker::{ContourTracker, EdgeSign, LostReason, TrackState, TrackerConfig};
 use nalgebra::{Matrix2, Vector2};
 
@@ -42,7 +43,7 @@ fn corners_at(k: usize, offset: Vector2<f64>) -> Vec<[f64; 2]> {
 /// Static clutter across the region the object sweeps, both polarities, about as strong as
 /// the object's own edges.
 fn background_lines() -> Vec<ClutterLine> {
-    let mut rng = Rng::new(7);
+    let mut rng = SplitMix64::new(7);
     (0..10)
         .map(|_| {
             let a = [rng.range(60.0, 260.0), rng.range(40.0, 200.0)];
@@ -52,7 +53,7 @@ fn background_lines() -> Vec<ClutterLine> {
                 a,
                 b: [a[0] + len * angle.cos(), a[1] + len * angle.sin()],
                 width_px: rng.range(1.5, 3.0),
-                delta: if rng.uniform() < 0.5 { -45.0 } else { 40.0 },
+                delta: if rng.next_f64() < 0.5 { -45.0 } else { 40.0 },
             }
         })
         .collect()
@@ -95,7 +96,7 @@ fn corner_rms(tracker: &ContourTracker, truth: &[[f64; 2]]) -> f64 {
 
 /// Tracks 300 frames of the moving scene with `config`; returns (overall RMS, worst frame RMS).
 fn track_sequence(config: TrackerConfig) -> (f64, f64) {
-    let mut rng = Rng::new(42);
+    let mut rng = SplitMix64::new(42);
     let mut image = ImageBuf::new(W, H);
     // Start from a polygon 1.5 px off, as a hand-made initialisation would be.
     let start: Vec<[f64; 2]> = corners_at(0, Vector2::zeros()).iter().map(|c| [c[0] + 1.5, c[1] - 1.0]).collect();
@@ -145,7 +146,7 @@ fn a_jump_beyond_the_search_range_ends_lost_not_locked_elsewhere() {
         .into_iter()
         .enumerate()
     {
-        let mut rng = Rng::new(100 + n as u64);
+        let mut rng = SplitMix64::new(100 + n as u64);
         let mut image = ImageBuf::new(W, H);
         let mut tracker = ContourTracker::new(config, &corners_at(0, Vector2::zeros())).unwrap();
         for k in 0..30 {
@@ -192,7 +193,7 @@ fn a_jump_beyond_the_search_range_ends_lost_not_locked_elsewhere() {
 
 #[test]
 fn leaving_the_image_is_reported_as_such() {
-    let mut rng = Rng::new(5);
+    let mut rng = SplitMix64::new(5);
     let mut image = ImageBuf::new(W, H);
     let mut tracker = ContourTracker::new(TrackerConfig::default(), &corners_at(0, Vector2::zeros())).unwrap();
     let mut state = TrackState::Tracking;

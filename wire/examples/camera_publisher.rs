@@ -15,7 +15,7 @@
 
 use std::time::{Duration, Instant};
 
-use handeye_wire::stereo::{Delivery, StereoGeometry, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::stereo::{Delivery, StereoFormat, StereoPublisher, StereoPublisherOptions};
 use handeye_wire::{monotonic_ns, Domain, WireNode};
 
 /// The example's pattern (see the module docs).
@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let node = WireNode::create(&domain, "camera-publisher")?;
 
     // 2. A publisher for one fixed geometry: two GRAY8 images, tightly packed (stride = width).
-    let geometry = StereoGeometry::gray8_pair(o.width, o.height);
+    let geometry = StereoFormat::gray8_pair(o.width, o.height);
     let delivery = if o.lossless {
         Delivery::Lossless { in_flight: 1, timeout: Duration::from_secs(30) }
     } else {

@@ -1,12 +1,15 @@
-//! Publisher liveness as seen by a subscriber, and rate-limited logging of rejections.
+//! Publisher liveness as seen by a subscriber, the one wait loop every subscriber runs on it,
+//! and rate-limited logging of rejections.
 
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 
+use crate::domain::WireNode;
 use crate::services::{event_id, LIVENESS_PERIOD};
 
 /// A change in whether any publisher is connected to a service.
@@ -86,6 +89,92 @@ impl Liveness {
         };
         self.alive = Some(alive);
         change
+    }
+}
+
+/// How [`wait_on`] ended, before the port turns it into its own event.
+#[derive(Debug)]
+pub(crate) enum Waited<T> {
+    /// The next valid item (a frame, a message).
+    Received(T),
+    /// The publisher appeared or went.
+    Publisher(LivenessChange),
+    /// SIGINT or SIGTERM.
+    Interrupted,
+    Timeout,
+}
+
+/// A subscriber port that sleeps on its service's event listener between items: what
+/// [`wait_on`] needs of it.
+pub(crate) trait ListeningPort {
+    type Item;
+    /// The next valid queued item, without waiting; invalid ones are counted and dropped.
+    fn try_receive(&mut self) -> Option<Self::Item>;
+    /// The port's [`Liveness::check_if_due`] on its service.
+    fn check_liveness(&mut self) -> Option<LivenessChange>;
+    /// Whether the process was asked to stop.
+    fn termination_requested(&self) -> bool;
+    /// The port's [`Liveness::nap`] on its listener.
+    fn nap(&mut self, deadline: Instant) -> Result<(), String>;
+}
+
+/// Waits up to `timeout` for the port's next valid item or a change of publisher liveness,
+/// sleeping on the event listener in between (no busy polling). Queued items come first;
+/// liveness is re-checked at least every [`LIVENESS_PERIOD`], so a killed publisher is
+/// reported within about that period. The error is the listener's failure, as text.
+pub(crate) fn wait_on<P: ListeningPort>(port: &mut P, timeout: Duration) -> Result<Waited<P::Item>, String> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(item) = port.try_receive() {
+            return Ok(Waited::Received(item));
+        }
+        if let Some(change) = port.check_liveness() {
+            return Ok(Waited::Publisher(change));
+        }
+        if port.termination_requested() {
+            return Ok(Waited::Interrupted);
+        }
+        if Instant::now() >= deadline {
+            return Ok(Waited::Timeout);
+        }
+        port.nap(deadline)?;
+    }
+}
+
+/// Why [`create_publisher`] gave up.
+#[derive(Debug)]
+pub(crate) enum PublisherSlotError {
+    /// Every publisher slot stayed taken for the whole wait (or the process was asked to stop).
+    Taken,
+    /// iceoryx2 refused the port for another reason.
+    Create(PublisherCreateError),
+}
+
+/// Creates a publisher with `create`, retrying every 50 ms for up to `timeout` while all of
+/// the service's publisher slots are taken: maybe by a publisher that was just killed, whose
+/// slot the dead-node cleanup before each retry frees.
+pub(crate) fn create_publisher<Port, Payload, Header>(
+    node: &WireNode,
+    service: &PubSubFactory<ipc::Service, Payload, Header>,
+    timeout: Duration,
+    mut create: impl FnMut() -> Result<Port, PublisherCreateError>,
+) -> Result<Port, PublisherSlotError>
+where
+    Payload: std::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized + 'static,
+    Header: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    let start = Instant::now();
+    loop {
+        match create() {
+            Ok(port) => return Ok(port),
+            Err(PublisherCreateError::ExceedsMaxSupportedPublishers) => {
+                service.try_cleanup_dead_nodes();
+                if start.elapsed() >= timeout || !node.sleep(Duration::from_millis(50)) {
+                    return Err(PublisherSlotError::Taken);
+                }
+            }
+            Err(e) => return Err(PublisherSlotError::Create(e)),
+        }
     }
 }
 

@@ -14,7 +14,9 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFac
 use thiserror::Error;
 
 use crate::domain::WireNode;
-use crate::liveness::{Liveness, LivenessChange, RateLimitedLog};
+use crate::liveness::{
+    create_publisher, wait_on, ListeningPort, Liveness, LivenessChange, PublisherSlotError, RateLimitedLog, Waited,
+};
 use crate::services::{
     event_id, open_event_service, open_message_service, OpenError, ServiceSizing, ROBOT_COMMAND_SIZING, ROBOT_STATE_SIZING,
     TELEMETRY_SIZING,
@@ -201,23 +203,15 @@ impl<T: WireMessage> MessagePublisher<T> {
     pub fn create(node: &WireNode) -> Result<Self, MessagePortError> {
         let service = open_message_service::<T>(node, T::SERVICE, &T::SIZING)?;
         let events = open_event_service(node, T::SERVICE, &T::SIZING)?;
-        let start = Instant::now();
-        let publisher = loop {
-            match service.publisher_builder().max_loaned_samples(T::SIZING.publisher_max_loaned_samples).create() {
-                Ok(p) => break p,
-                Err(iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers) => {
-                    service.try_cleanup_dead_nodes();
-                    if start.elapsed() >= Duration::from_secs(2) || !node.sleep(Duration::from_millis(50)) {
-                        return Err(MessagePortError::PublisherSlotsTaken {
-                            service: T::SERVICE,
-                            domain: node.domain().to_string(),
-                            max: T::SIZING.max_publishers,
-                        });
-                    }
-                }
-                Err(e) => return Err(MessagePortError::Port { port: "publisher", service: T::SERVICE, detail: format!("{e:?}") }),
-            }
-        };
+        let create = || service.publisher_builder().max_loaned_samples(T::SIZING.publisher_max_loaned_samples).create();
+        let publisher = create_publisher(node, &service, Duration::from_secs(2), create).map_err(|e| match e {
+            PublisherSlotError::Taken => MessagePortError::PublisherSlotsTaken {
+                service: T::SERVICE,
+                domain: node.domain().to_string(),
+                max: T::SIZING.max_publishers,
+            },
+            PublisherSlotError::Create(e) => MessagePortError::Port { port: "publisher", service: T::SERVICE, detail: format!("{e:?}") },
+        })?;
         let notifier = events
             .notifier_builder()
             .default_event_id(EventId::new(event_id::SAMPLE))
@@ -368,33 +362,20 @@ impl<T: WireMessage> MessageSubscriber<T> {
     /// Waits up to `timeout` for the next valid message or a change of publisher liveness,
     /// sleeping on the event listener in between.
     pub fn wait(&mut self, timeout: Duration) -> Result<MessageEvent<T>, MessageWaitError> {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(msg) = self.try_receive() {
-                return Ok(MessageEvent::Message(msg));
+        let waited = wait_on(self, timeout).map_err(|detail| MessageWaitError::Listener { service: T::SERVICE, detail })?;
+        Ok(match waited {
+            Waited::Received(msg) => MessageEvent::Message(msg),
+            Waited::Publisher(LivenessChange::Up) => {
+                self.stats.publisher_up += 1;
+                MessageEvent::PublisherUp
             }
-            match self.liveness.check_if_due(&self.service) {
-                Some(LivenessChange::Up) => {
-                    self.stats.publisher_up += 1;
-                    return Ok(MessageEvent::PublisherUp);
-                }
-                Some(LivenessChange::Gone) => {
-                    self.stats.publisher_gone += 1;
-                    return Ok(MessageEvent::PublisherGone);
-                }
-                None => {}
+            Waited::Publisher(LivenessChange::Gone) => {
+                self.stats.publisher_gone += 1;
+                MessageEvent::PublisherGone
             }
-            if self.node.termination_requested() {
-                return Ok(MessageEvent::Interrupted);
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(MessageEvent::Timeout);
-            }
-            self.liveness
-                .nap(&self.listener, deadline)
-                .map_err(|detail| MessageWaitError::Listener { service: T::SERVICE, detail })?;
-        }
+            Waited::Interrupted => MessageEvent::Interrupted,
+            Waited::Timeout => MessageEvent::Timeout,
+        })
     }
 
     /// Passes every valid message, in order, to `accept` until it returns `true` (that message
@@ -433,6 +414,26 @@ impl<T: WireMessage> MessageSubscriber<T> {
                 MessageEvent::PublisherUp | MessageEvent::PublisherGone => {}
             }
         }
+    }
+}
+
+impl<T: WireMessage> ListeningPort for MessageSubscriber<T> {
+    type Item = T;
+
+    fn try_receive(&mut self) -> Option<T> {
+        MessageSubscriber::try_receive(self)
+    }
+
+    fn check_liveness(&mut self) -> Option<LivenessChange> {
+        self.liveness.check_if_due(&self.service)
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.node.termination_requested()
+    }
+
+    fn nap(&mut self, deadline: Instant) -> Result<(), String> {
+        self.liveness.nap(&self.listener, deadline)
     }
 }
 

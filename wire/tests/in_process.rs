@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use handeye_wire::domain::remove_domain_files;
 use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSendError, MessageSubscriber, WaitUntil};
 use handeye_wire::stereo::{
-    Delivery, PublishError, StereoEvent, StereoFrame, StereoGeometry, StereoPublisher, StereoPublisherOptions, StereoSubscriber,
+    Delivery, PublishError, StereoEvent, StereoFrame, StereoFormat, StereoPublisher, StereoPublisherOptions, StereoSubscriber,
 };
 use handeye_wire::*;
 
@@ -29,7 +29,7 @@ fn pixel(frame: u64, camera: usize, x: usize, y: usize) -> u8 {
     (x + 3 * y + 7 * camera + 11 * frame as usize) as u8
 }
 
-fn fill_pattern(frame: u64, g: &StereoGeometry) -> impl FnOnce(&mut [u8]) {
+fn fill_pattern(frame: u64, g: &StereoFormat) -> impl FnOnce(&mut [u8]) {
     let g = *g;
     move |buf: &mut [u8]| {
         let (w, h, s) = (g.width as usize, g.height as usize, g.stride as usize);
@@ -70,7 +70,7 @@ fn frames_arrive_intact_with_padded_stride() {
     let d = TestDomain::new("roundtrip");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry { stride: 40, ..StereoGeometry::gray8_pair(37, 9) };
+    let geometry = StereoFormat { stride: 40, ..StereoFormat::gray8_pair(37, 9) };
     let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
     let mut publisher = StereoPublisher::create(&pub_node, geometry, StereoPublisherOptions::default()).unwrap();
     for k in 0..5u64 {
@@ -99,7 +99,7 @@ fn malformed_samples_are_rejected_by_reason_and_the_receiver_keeps_working() {
     let d = TestDomain::new("malformed");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry::gray8_pair(16, 8);
+    let geometry = StereoFormat::gray8_pair(16, 8);
     let len = 16 * 8 * 2;
     let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
     let mut p = StereoPublisher::create_raw(&pub_node, geometry, 4096, StereoPublisherOptions::default()).unwrap();
@@ -144,7 +144,7 @@ fn latest_delivery_keeps_the_newest_frame_for_a_lagging_subscriber() {
     let d = TestDomain::new("latest");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let geometry = StereoFormat::gray8_pair(8, 4);
     let mut sub = StereoSubscriber::create(&sub_node, 1).unwrap();
     let mut p = StereoPublisher::create(&pub_node, geometry, StereoPublisherOptions::default()).unwrap();
     p.publish(0, fill_pattern(0, &geometry)).unwrap();
@@ -162,7 +162,7 @@ fn lossless_delivery_waits_for_the_subscriber_instead_of_dropping() {
     let d = TestDomain::new("lossless");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let geometry = StereoFormat::gray8_pair(8, 4);
     let mut sub = StereoSubscriber::create(&sub_node, 1).unwrap();
     let options = StereoPublisherOptions {
         delivery: Delivery::Lossless { in_flight: 1, timeout: Duration::from_millis(50) },
@@ -191,7 +191,7 @@ fn a_subscriber_that_leaves_frees_the_lossless_publisher() {
     let d = TestDomain::new("leaves");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let geometry = StereoFormat::gray8_pair(8, 4);
     let sub = StereoSubscriber::create(&sub_node, 1).unwrap();
     let options = StereoPublisherOptions {
         delivery: Delivery::Lossless { in_flight: 1, timeout: Duration::from_millis(500) },
@@ -211,12 +211,12 @@ fn publisher_up_and_gone_are_reported_on_clean_exit() {
     let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
     assert!(matches!(sub.wait(Duration::from_millis(10)).unwrap(), StereoEvent::Timeout));
     assert_eq!(sub.publisher_alive(), Some(false));
-    let p = StereoPublisher::create(&pub_node, StereoGeometry::gray8_pair(8, 4), StereoPublisherOptions::default()).unwrap();
+    let p = StereoPublisher::create(&pub_node, StereoFormat::gray8_pair(8, 4), StereoPublisherOptions::default()).unwrap();
     assert!(matches!(sub.wait(Duration::from_secs(2)).unwrap(), StereoEvent::PublisherUp));
     drop(p);
     assert!(matches!(sub.wait(Duration::from_secs(2)).unwrap(), StereoEvent::PublisherGone));
     // A second publisher (restart) is picked up by the same subscriber.
-    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let geometry = StereoFormat::gray8_pair(8, 4);
     let mut p = StereoPublisher::create(&pub_node, geometry, StereoPublisherOptions::default()).unwrap();
     assert!(matches!(sub.wait(Duration::from_secs(2)).unwrap(), StereoEvent::PublisherUp));
     p.publish(0, fill_pattern(0, &geometry)).unwrap();
@@ -229,7 +229,7 @@ fn publisher_up_and_gone_are_reported_on_clean_exit() {
 fn only_one_stereo_publisher_per_domain() {
     let d = TestDomain::new("onepub");
     let node = WireNode::create(&d.0, "pub").unwrap();
-    let g = StereoGeometry::gray8_pair(8, 4);
+    let g = StereoFormat::gray8_pair(8, 4);
     let _a = StereoPublisher::create(&node, g, StereoPublisherOptions::default()).unwrap();
     let options = StereoPublisherOptions { create_timeout: Duration::from_millis(100), ..Default::default() };
     let err = StereoPublisher::create(&node, g, options).err().expect("second publisher must be refused");
@@ -242,7 +242,7 @@ fn domains_are_isolated() {
     let b = TestDomain::new("iso-b");
     let na = WireNode::create(&a.0, "pub").unwrap();
     let nb = WireNode::create(&b.0, "sub").unwrap();
-    let g = StereoGeometry::gray8_pair(8, 4);
+    let g = StereoFormat::gray8_pair(8, 4);
     let mut sub = StereoSubscriber::create(&nb, 2).unwrap();
     let mut p = StereoPublisher::create(&na, g, StereoPublisherOptions::default()).unwrap();
     assert_eq!(p.subscriber_count(), 0);
@@ -334,7 +334,7 @@ fn flush_waits_until_the_subscriber_has_taken_every_frame() {
     let d = TestDomain::new("flush");
     let pub_node = WireNode::create(&d.0, "pub").unwrap();
     let sub_node = WireNode::create(&d.0, "sub").unwrap();
-    let geometry = StereoGeometry::gray8_pair(8, 4);
+    let geometry = StereoFormat::gray8_pair(8, 4);
     let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
     let options = StereoPublisherOptions {
         delivery: Delivery::Lossless { in_flight: 2, timeout: Duration::from_millis(50) },

@@ -10,6 +10,7 @@ use std::fmt;
 
 use handeye_vision::image::ImageBuf;
 use handeye_vision::locate::{locate_moving, LocateConfig, LocateError};
+use handeye_vision::planner::geom;
 use handeye_vision::tracker::{ContourTracker, Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, GripperCommand};
@@ -174,7 +175,7 @@ impl AcquireGripper {
                         return Step::fail(FailureKind::TrackerUnsure, format!("acquire_gripper: plate tracker ({view:?}) confidence {score:.2} < {}", m.cfg.acquire.min_score));
                     }
                     let corners: Vec<_> = t.corners().collect();
-                    areas[i] = polygon_area(corners.iter().map(|p| [p.x, p.y]));
+                    areas[i] = geom::area(&corners.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>());
                     if areas[i] < m.cfg.acquire.min_plate_area_px2 {
                         return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate ({view:?}) only {:.0} px²", areas[i]));
                     }
@@ -189,13 +190,6 @@ impl AcquireGripper {
             }
         }
     }
-}
-
-/// Area of a polygon, px².
-pub fn polygon_area(points: impl Iterator<Item = [f64; 2]>) -> f64 {
-    let pts: Vec<[f64; 2]> = points.collect();
-    let n = pts.len();
-    (0..n).map(|i| pts[i][0] * pts[(i + 1) % n][1] - pts[(i + 1) % n][0] * pts[i][1]).sum::<f64>().abs() / 2.0
 }
 
 /// Worker job: the plate's corners in both views from the open and closed pairs.

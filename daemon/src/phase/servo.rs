@@ -34,7 +34,7 @@
 
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::servo::{
-    CoplanarityServo, FacetGoal, GripperView, Motion, PlaneTransfer, ServoConfig, ServoModel, StepOutcome, StereoFrame, StereoPoint,
+    CoplanarityServo, FacetGoal, GripperView, ToolMotion, PlaneTransfer, ServoConfig, ServoModel, StepOutcome, StereoFrame, StereoPoint,
 };
 use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
@@ -110,7 +110,7 @@ impl TargetMean {
         }
         let k = f64::from(self.n);
         let s = self.sum.map(|v| v / k);
-        let frame = |i: usize| handeye_vision::servo::AffineFrame { o: [s[i], s[i + 1]], e1: [s[i + 2], s[i + 3]], e2: [s[i + 4], s[i + 5]] };
+        let frame = |i: usize| handeye_vision::servo::ViewFrame { o: [s[i], s[i + 1]], e1: [s[i + 2], s[i + 3]], e2: [s[i + 4], s[i + 5]] };
         Some(StereoFrame { left: frame(0), right: frame(6) })
     }
 }
@@ -507,7 +507,7 @@ impl ServoPhase {
     }
 
     /// The servo's move (reference point translation, yaw about it) as a tool move.
-    fn tool_move(&self, m: &Mission, c: &Cycle<'_>, motion: &Motion) -> Cmd {
+    fn tool_move(&self, m: &Mission, c: &Cycle<'_>, motion: &ToolMotion) -> Cmd {
         let yaw = f64::from(c.robot.tool_yaw_rad);
         let lever = tool_from_reference(&m.cfg.gripper, yaw);
         let (s, co) = motion.yaw_rad.sin_cos();
@@ -520,10 +520,10 @@ impl ServoPhase {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use handeye_vision::servo::AffineFrame;
+    use handeye_vision::servo::ViewFrame;
 
     fn frame(dx: f64) -> StereoFrame {
-        let f = |o: [f64; 2]| AffineFrame { o: [o[0] + dx, o[1]], e1: [30.0, 2.0], e2: [-3.0, 40.0] };
+        let f = |o: [f64; 2]| ViewFrame { o: [o[0] + dx, o[1]], e1: [30.0, 2.0], e2: [-3.0, 40.0] };
         StereoFrame { left: f([300.0, 400.0]), right: f([280.0, 410.0]) }
     }
 

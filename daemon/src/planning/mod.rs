@@ -24,15 +24,16 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
 use handeye_vision::image::ImageBuf;
-use handeye_vision::planner::{Planner, PlannerConfig, StereoGeometry};
+use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
-pub use pixels::{edge_support, mask_and_fill, simplify_closed, tracker_order};
+pub use pixels::{edge_support, mask_and_fill};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -225,7 +226,7 @@ fn project(model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64;
 
 /// Projects a scene point through the pinhole cameras when there are any (planner pixels in,
 /// tracker pixels out), else through the affine model.
-fn project_scene(geo: &StereoGeometry, model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
+fn project_scene(geo: &EpipolarGeometry, model: &AffineStereo, lever_m: &[f64; 3], p: &Vector3<f64>) -> [[f64; 2]; 2] {
     let Some(cams) = &geo.projective else { return project(model, lever_m, p) };
     let h = p.push(1.0);
     let at = |cam: &nalgebra::Matrix3x4<f64>| {
@@ -320,8 +321,8 @@ fn rear_edges_from_image(
             if j != k
                 && !src.hypothesised
                 && facet.component == component
-                && pixels::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
-                && pixels::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
+                && geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
+                && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
             {
                 drop[j] = true;
             }
@@ -368,7 +369,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let lever = Vector3::from(req.calibration.lever_m);
     let points: Vec<Vector3<f64>> = req.calibration.cage_robot_m.iter().map(|x| x - lever).collect();
     let images: Vec<[f64; 4]> = req.calibration.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
-    let mut geo = StereoGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
+    let mut geo = EpipolarGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
     }
@@ -417,8 +418,8 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             let (src, facet) = (&ps.facets[j], &ps.scene.facets[j]);
             let superseded = (hypothesised_start..ps.facets.len()).any(|k| {
                 ps.scene.facets[k].component == facet.component
-                    && pixels::covered_share(&src.left_px, &ps.facets[k].left_px) >= SUPERSEDED_SHARE
-                    && pixels::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
+                    && geom::covered_share(&src.left_px, &ps.facets[k].left_px) >= SUPERSEDED_SHARE
+                    && geom::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
             });
             if superseded {
                 summary.superseded_facets.push(src.plan_facet);

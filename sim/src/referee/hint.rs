@@ -11,7 +11,7 @@ use glam::DVec3;
 use handeye_wire::hint::{HINT_VERSION, OperatorHint};
 
 use crate::render::camera::signed_area_px2;
-use crate::rng::SplitMix64;
+use handeye_vision::rng::SplitMix64;
 use crate::simulator::Simulator;
 
 /// Largest corner error of the hint in each image coordinate, pixels.
@@ -89,7 +89,7 @@ pub fn operator_hint(sim: &Simulator, seed: u64) -> Result<(OperatorHint, HintFa
     let Some((_, face, mut left, mut right, depth_m)) = best else {
         return Err(HintFacetError::NoGraspableFacet(b.name.clone()));
     };
-    let mut rng = SplitMix64::new(crate::rng::mix64(seed ^ 0x4849_4e54));
+    let mut rng = SplitMix64::new(handeye_vision::rng::mix64(seed ^ 0x4849_4e54));
     let mut jitter = |v: f64, e: f64| v + (2.0 * rng.next_f64() - 1.0) * e;
     for p in left.iter_mut().chain(right.iter_mut()) {
         p[0] = jitter(p[0], HINT_CORNER_ERROR_PX);

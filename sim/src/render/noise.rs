@@ -6,7 +6,7 @@
 //! of it starting at an offset drawn from the frame's seed. Deterministic for a seed; a
 //! different seed gives different noise.
 
-use crate::rng::{SplitMix64, mix64};
+use handeye_vision::rng::{SplitMix64, mix64};
 
 /// Table length: large against a row (640 px), so rows rarely share a window.
 const TABLE_LEN: usize = 1 << 18;

@@ -17,7 +17,7 @@ use super::gpu::{self, Gpu, GpuVertex, PostUniform, ViewUniform};
 use super::noise;
 use super::scene::Scene;
 use super::shading::Lighting;
-use crate::rng::mix64;
+use handeye_vision::rng::mix64;
 
 /// Per-camera sensor model.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::config::{BlockConfig, LightConfig, Scenario};
 use crate::cell::geometry::BlockShape;
 use crate::render::shading::Lighting;
-use crate::rng::{SplitMix64, mix64};
+use handeye_vision::rng::{SplitMix64, mix64};
 
 impl Scenario {
     /// Largest random shift of the target block (each of x and y), metres, and turn,

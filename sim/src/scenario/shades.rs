@@ -3,7 +3,7 @@
 //! (what it predicts the renderer will draw), so the two cannot disagree.
 
 use super::config::BlockConfig;
-use crate::rng::SplitMix64;
+use handeye_vision::rng::SplitMix64;
 
 impl BlockConfig {
     /// Albedo per face (the face order of `kind`, see `sim/README.md`) of this block, the
@@ -13,7 +13,7 @@ impl BlockConfig {
     pub fn face_shades(&self, index: usize, scenario_seed: u64) -> Vec<f64> {
         match &self.shades {
             Some(s) => s.clone(),
-            None => random_shades(self.shade_seed.unwrap_or_else(|| crate::rng::mix64(scenario_seed ^ (index as u64 + 1))), self.kind.face_count()),
+            None => random_shades(self.shade_seed.unwrap_or_else(|| handeye_vision::rng::mix64(scenario_seed ^ (index as u64 + 1))), self.kind.face_count()),
         }
     }
 }

@@ -8,7 +8,7 @@ use clap::Args;
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::synth::SynthScene;
-use handeye_vision::planner::{Planner, PlannerConfig, Stage, StereoGeometry};
+use handeye_vision::planner::{Planner, PlannerConfig, Stage, EpipolarGeometry};
 use nalgebra::Vector3;
 use serde_json::{json, Value};
 
@@ -84,7 +84,7 @@ pub fn face_correspondences(a: &Value, b: &Value, a_name: &str, b_name: &str) ->
     Ok(out)
 }
 
-fn real_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)> {
+fn real_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, EpipolarGeometry, String)> {
     let left = load_gray(&dir.join("image0000.png"))?;
     let right = load_gray(&dir.join("image0040.png"))?;
     let f0_path = dir.join("faces-frame0.json");
@@ -92,11 +92,11 @@ fn real_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)>
         .with_context(|| format!("{} is not valid JSON", f0_path.display()))?;
     let f40: Value = serde_json::from_str(FRAME40).context("built-in frame-40 annotation")?;
     let pts = face_correspondences(&f0, &f40, "faces-frame0.json", "visp-cube-faces-frame40.json")?;
-    let geo = StereoGeometry::from_correspondences(&pts, 0.5, 10.0).context("epipolar constraint from the annotated corners")?;
+    let geo = EpipolarGeometry::from_correspondences(&pts, 0.5, 10.0).context("epipolar constraint from the annotated corners")?;
     Ok((left, right, geo, format!("visp-cube frames 0 and 40 ({})", dir.display())))
 }
 
-fn snapshot_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)> {
+fn snapshot_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, EpipolarGeometry, String)> {
     let left = load_gray(&dir.join("left.png"))?;
     let right = load_gray(&dir.join("right.png"))?;
     let cage = dir.join("cage.json");
@@ -104,13 +104,13 @@ fn snapshot_pair(dir: &Path) -> Result<(ImageBuf, ImageBuf, StereoGeometry, Stri
     Ok((left, right, geo, format!("simulator snapshot {}", dir.display())))
 }
 
-fn synthetic_pair() -> Result<(ImageBuf, ImageBuf, StereoGeometry, String)> {
+fn synthetic_pair() -> Result<(ImageBuf, ImageBuf, EpipolarGeometry, String)> {
     let scene = SynthScene::random(5, 7);
     let pair = scene.render(7);
     let robot: Vec<Vector3<f64>> = pair.cage.iter().map(|c| Vector3::from(c.0)).collect();
     let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
     let model = AffineStereo::fit(&robot, &image).context("affine model of the synthetic cage")?;
-    Ok((pair.left, pair.right, StereoGeometry::from_model(model, 0.5, 10.0), "synthetic: five boxes, two affine cameras (seed 7)".into()))
+    Ok((pair.left, pair.right, EpipolarGeometry::from_model(model, 0.5, 10.0), "synthetic: five boxes, two affine cameras (seed 7)".into()))
 }
 
 fn median(v: &mut [f64]) -> f64 {

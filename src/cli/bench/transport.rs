@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use handeye_wire::domain::remove_domain_files;
-use handeye_wire::stereo::{Delivery, StereoEvent, StereoGeometry, StereoPublisher, StereoPublisherOptions, StereoSubscriber};
+use handeye_wire::stereo::{Delivery, StereoEvent, StereoFormat, StereoPublisher, StereoPublisherOptions, StereoSubscriber};
 use handeye_wire::{monotonic_ns, Domain, WireNode};
 use serde_json::json;
 
@@ -65,7 +65,7 @@ pub fn run(args: TransportArgs) -> Result<()> {
 
 fn publisher(args: &TransportArgs, domain: &Domain) -> Result<()> {
     let node = WireNode::create(domain, "bench-publisher")?;
-    let geometry = StereoGeometry::gray8_pair(args.width_px, args.height_px);
+    let geometry = StereoFormat::gray8_pair(args.width_px, args.height_px);
     let options = StereoPublisherOptions {
         delivery: Delivery::Lossless { in_flight: 1, timeout: Duration::from_secs(30) },
         ..Default::default()

@@ -29,6 +29,7 @@ use nalgebra::Vector3;
 
 use super::{GraspScene, SceneEdge, SceneFacet, Segment3};
 use crate::planner::Plan;
+use crate::union_find::UnionFind;
 
 /// A facet of the scene with where it came from.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,24 +59,6 @@ pub struct PlannedScene {
 
 /// Facets larger than this (m²) are not joined to what touches them (see the module docs).
 const MAX_JOIN_AREA_M2: f64 = 0.01;
-
-struct UnionFind(Vec<usize>);
-
-impl UnionFind {
-    fn find(&mut self, mut i: usize) -> usize {
-        while self.0[i] != i {
-            self.0[i] = self.0[self.0[i]];
-            i = self.0[i];
-        }
-        i
-    }
-    fn union(&mut self, a: usize, b: usize) {
-        let (a, b) = (self.find(a), self.find(b));
-        if a != b {
-            self.0[a.max(b)] = a.min(b);
-        }
-    }
-}
 
 /// Distance of point `p` from segment `a`-`b`.
 fn point_segment_m(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
@@ -128,7 +111,7 @@ pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f
     let n_facets = plan.facets.len();
     let n_matches = plan.matches.len();
     // Nodes: plan facets, then matches. Facets with the planner's component id are joined.
-    let mut uf = UnionFind((0..n_facets + n_matches).collect());
+    let mut uf = UnionFind::new(n_facets + n_matches);
     let mut first_of_component: Vec<Option<usize>> = Vec::new();
     for (fi, f) in plan.facets.iter().enumerate() {
         let c = f.facet.component as usize;
@@ -326,7 +309,7 @@ mod tests {
     use crate::affine::AffineStereo;
     use crate::grasp::{plan_grasps, GraspConfig};
     use crate::planner::synth::{BoxSpec, SynthScene};
-    use crate::planner::{Planner, PlannerConfig, StereoGeometry};
+    use crate::planner::{Planner, PlannerConfig, EpipolarGeometry};
 
     fn plan_scene(boxes: Vec<BoxSpec>, seed: u64) -> (PlannedScene, Plan) {
         let synth = SynthScene::new(boxes);
@@ -335,7 +318,7 @@ mod tests {
         let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
         let model = AffineStereo::fit(&robot, &image).unwrap();
         let toward = model.toward_cameras();
-        let geo = StereoGeometry::from_model(model, 0.5, 10.0);
+        let geo = EpipolarGeometry::from_model(model, 0.5, 10.0);
         let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
         (scene_from_plan(&plan, toward, 1.0, 0.004), plan)
     }
@@ -422,7 +405,7 @@ mod tests {
         let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
         let model = AffineStereo::fit(&robot, &image).unwrap();
         let toward = model.toward_cameras();
-        let geo = StereoGeometry::from_model(model.clone(), 0.5, 10.0);
+        let geo = EpipolarGeometry::from_model(model.clone(), 0.5, 10.0);
         let plan = Planner::new(PlannerConfig::default()).plan(&pair.left.view(), &pair.right.view(), &geo);
         let full = scene_from_plan(&plan, toward, 1.0, 0.004);
         let mut ps = full.clone();

@@ -453,16 +453,16 @@ mod tests {
             eprintln!("no AVX2 on this processor: nothing to compare");
             return;
         }
-        let mut rng = crate::planner::synth::XorShift(0x9e37_79b9_7f4a_7c15);
+        let mut rng = crate::rng::SplitMix64::new(0x9e37_79b9_7f4a_7c15);
         let mut c = Canvas::new(203, 157, 90.0);
         for _ in 0..40 {
-            let (x, y) = (rng.uniform() * 203.0, rng.uniform() * 157.0);
-            let (a, r) = (rng.uniform() * 6.3, 4.0 + rng.uniform() * 30.0);
+            let (x, y) = (rng.range(0.0, 203.0), rng.range(0.0, 157.0));
+            let (a, r) = (rng.range(0.0, 6.3), rng.range(4.0, 34.0));
             let p: Vec<[f64; 2]> = (0..4).map(|k| {
-                let t = (a + k as f32 * 1.7) as f64;
-                [x as f64 + r as f64 * t.cos(), y as f64 + r as f64 * (1.3 * t).sin()]
+                let t = a + k as f64 * 1.7;
+                [x + r * t.cos(), y + r * (1.3 * t).sin()]
             }).collect();
-            c.fill_polygon(&p, rng.uniform() * 255.0);
+            c.fill_polygon(&p, rng.range(0.0, 255.0) as f32);
         }
         let img = c.to_image(6.0, 3);
         let mut fast = EdgeDetector::new(EdgeConfig::default());

@@ -24,6 +24,7 @@ use super::planes::{Plane, Transfer, TransferFit};
 use super::reconstruct::union_by_transfer;
 use super::relations::{End, JunctionKind, Relations};
 use super::segments::Segment;
+use crate::union_find::UnionFind;
 
 /// Tolerances of facet formation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,28 +82,6 @@ pub struct FacetInput<'a> {
     pub rel_left: &'a Relations,
     pub friends: &'a [Friendship],
     pub epipolar: &'a EpipolarFrame,
-}
-
-struct UnionFind(Vec<usize>);
-
-impl UnionFind {
-    fn new(n: usize) -> Self {
-        Self((0..n).collect())
-    }
-    fn find(&mut self, mut i: usize) -> usize {
-        while self.0[i] != i {
-            self.0[i] = self.0[self.0[i]];
-            i = self.0[i];
-        }
-        i
-    }
-    fn union(&mut self, a: usize, b: usize) -> bool {
-        let (ra, rb) = (self.find(a), self.find(b));
-        if ra != rb {
-            self.0[ra.max(rb)] = ra.min(rb);
-        }
-        ra != rb
-    }
 }
 
 /// Forms the facets of all planes.

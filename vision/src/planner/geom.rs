@@ -1,6 +1,7 @@
-//! Small 2-D geometry used across the planner: points, total-least-squares line fits, convex
-//! hulls, polygon area and containment, and a rasterised polygon IoU (exact enough for scoring,
-//! and valid for non-convex polygons such as the L-shaped faces of L-blocks).
+//! Small 2-D image geometry, the one home for it in the workspace: points, total-least-squares
+//! line fits, convex hulls, polygon area and containment, a rasterised polygon IoU and overlap
+//! share (exact enough for scoring, and valid for non-convex polygons such as the L-shaped
+//! faces of L-blocks), and the simplification of a facet's outline into a tracker's corners.
 
 /// A 2-D point or vector in pixels.
 pub type P2 = [f64; 2];
@@ -161,30 +162,123 @@ pub fn convex_hull(pts: &[P2]) -> Vec<usize> {
 /// polygon (even-odd rule) with the tolerance measured to the nearest edge.
 pub fn contains(poly: &[P2], p: P2, tol_px: f64) -> bool {
     let n = poly.len();
-    if n == 0 {
-        return false;
-    }
-    let mut inside = false;
-    let mut j = n - 1;
+    inside(poly, p) || (tol_px > 0.0 && (0..n).any(|i| point_segment_distance(p, poly[i], poly[(i + 1) % n]) <= tol_px))
+}
+
+/// Even-odd test of `p` against the polygon's sides (false for no polygon).
+fn inside(poly: &[P2], p: P2) -> bool {
+    let mut odd = false;
+    let n = poly.len();
     for i in 0..n {
-        let (a, b) = (poly[i], poly[j]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1]);
-            if p[0] < x {
-                inside = !inside;
-            }
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+            odd = !odd;
         }
-        j = i;
     }
-    inside || (tol_px > 0.0 && (0..n).any(|i| point_segment_distance(p, poly[i], poly[(i + 1) % n]) <= tol_px))
+    odd
 }
 
 /// Distance from `p` to the segment `a`–`b`.
 pub fn point_segment_distance(p: P2, a: P2, b: P2) -> f64 {
-    let ab = sub(b, a);
-    let l2 = dot(ab, ab);
-    let t = if l2 > 0.0 { (dot(sub(p, a), ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
-    dist(p, add(a, scale(ab, t)))
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// Share of polygon `a`'s area (pixel centres inside it) that lies inside polygon `b`; 0
+/// when `a` covers no pixel centre.
+pub fn covered_share(a: &[P2], b: &[P2]) -> f64 {
+    if a.len() < 3 || b.len() < 3 || a.iter().chain(b).flatten().any(|v| !v.is_finite()) {
+        return 0.0;
+    }
+    let lo = |k: usize| a.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min).floor() as i64;
+    let hi = |k: usize| a.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max).ceil() as i64;
+    let (mut total, mut shared) = (0u64, 0u64);
+    for y in lo(1)..=hi(1) {
+        for x in lo(0)..=hi(0) {
+            let p = [x as f64, y as f64];
+            if inside(a, p) {
+                total += 1;
+                shared += u64::from(inside(b, p));
+            }
+        }
+    }
+    if total == 0 { 0.0 } else { shared as f64 / total as f64 }
+}
+
+/// Indices of the vertices kept by Douglas-Peucker on a closed polygon (tolerance `tol`),
+/// at least three, in order.
+pub fn simplify_closed(poly: &[P2], tol: f64) -> Vec<usize> {
+    let n = poly.len();
+    if n <= 3 {
+        return (0..n).collect();
+    }
+    // Split at vertex 0 and the vertex farthest from it.
+    let far = (1..n).max_by(|&a, &b| {
+        let d = |i: usize| (poly[i][0] - poly[0][0]).hypot(poly[i][1] - poly[0][1]);
+        d(a).total_cmp(&d(b))
+    });
+    let Some(far) = far else { return (0..n).collect() };
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[far] = true;
+    fn dp(poly: &[P2], a: usize, b: usize, tol: f64, keep: &mut [bool]) {
+        // Vertices strictly between a and b, going forward (cyclically).
+        let n = poly.len();
+        let mut best = (0.0, None);
+        let mut i = (a + 1) % n;
+        while i != b {
+            let d = point_segment_distance(poly[i], poly[a], poly[b]);
+            if d > best.0 {
+                best = (d, Some(i));
+            }
+            i = (i + 1) % n;
+        }
+        if let (d, Some(i)) = best
+            && d > tol
+        {
+            keep[i] = true;
+            dp(poly, a, i, tol, keep);
+            dp(poly, i, b, tol, keep);
+        }
+    }
+    dp(poly, 0, far, tol, &mut keep);
+    dp(poly, far, 0, tol, &mut keep);
+    let mut out: Vec<usize> = (0..n).filter(|&i| keep[i]).collect();
+    // Fewer than three: add the vertex farthest from the chord.
+    while out.len() < 3 {
+        let extra = (0..n).filter(|i| !out.contains(i)).max_by(|&a, &b| {
+            let d = |i: usize| point_segment_distance(poly[i], poly[out[0]], poly[out[out.len() - 1]]);
+            d(a).total_cmp(&d(b))
+        });
+        match extra {
+            Some(e) => {
+                out.push(e);
+                out.sort_unstable();
+            }
+            None => break,
+        }
+    }
+    out
+}
+
+/// `keep` (indices into `poly`, in order) rotated to start at the corner whose two sides
+/// span the largest parallelogram: a tracker's template frame is `e1 = c1 − c0`,
+/// `e2 = c_{n−1} − c0`, and the servo's view of the facet (its `s, t` rows and plane
+/// transfer) is only as well conditioned as that frame; a short side at a notch of an L
+/// would make it lopsided.
+pub fn tracker_order(poly: &[P2], keep: &[usize]) -> Vec<usize> {
+    let n = keep.len();
+    if n < 3 {
+        return keep.to_vec();
+    }
+    let area = |k: usize| {
+        let (o, a, b) = (poly[keep[k]], poly[keep[(k + 1) % n]], poly[keep[(k + n - 1) % n]]);
+        ((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])).abs()
+    };
+    let best = (0..n).max_by(|&a, &b| area(a).total_cmp(&area(b)).then(b.cmp(&a))).unwrap_or(0);
+    (0..n).map(|k| keep[(best + k) % n]).collect()
 }
 
 /// Whether two convex polygons (any orientation) intersect, by the separating axis test.
@@ -351,5 +445,34 @@ mod tests {
         assert!((p[0] - 3.0).abs() < 1e-12 && p[1].abs() < 1e-12);
         assert!((s - 3.0).abs() < 1e-12 && (t - 1.0).abs() < 1e-12);
         assert!(intersect_lines([0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [2.0, 0.0]).is_none());
+    }
+
+    #[test]
+    fn covered_share_is_the_share_of_the_first_polygon_inside_the_second() {
+        let square = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let left_half = [[-1.0, -1.0], [4.9, -1.0], [4.9, 11.0], [-1.0, 11.0]];
+        assert_eq!(covered_share(&square, &square), 1.0);
+        // Pixel centres 0..=4 of the ten columns inside the square (0..10).
+        let half = covered_share(&square, &left_half);
+        assert!((half - 0.5).abs() < 0.01, "{half}");
+        assert_eq!(covered_share(&left_half, &[[20.0, 0.0], [30.0, 0.0], [30.0, 10.0]]), 0.0);
+        assert_eq!(covered_share(&square, &[[0.0, 0.0], [1.0, 1.0]]), 0.0, "not a polygon");
+        assert_eq!(covered_share(&[[f64::NAN, 0.0], [1.0, 0.0], [1.0, 1.0]], &square), 0.0);
+    }
+
+    #[test]
+    fn simplification_drops_slivers_and_keeps_corners() {
+        // A square whose corner (10, 0) is split into two vertices 1 px apart, plus a point
+        // in the middle of a side.
+        let poly = [[0.0, 0.0], [9.0, 0.0], [10.0, 1.0], [10.0, 10.0], [5.0, 10.2], [0.0, 10.0]];
+        let keep = simplify_closed(&poly, 1.5);
+        assert_eq!(keep.len(), 4, "{keep:?}");
+        assert!(keep.contains(&0) && keep.contains(&5));
+        // A triangle stays a triangle.
+        assert_eq!(simplify_closed(&[[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]], 1.5), vec![0, 1, 2]);
+        // An L (tall leg on the right): the frame starts at the corner with the longest
+        // sides, the bottom-right one (40 across, 40 up).
+        let l = [[0.0, 0.0], [0.0, -20.0], [20.0, -20.0], [20.0, -40.0], [40.0, -40.0], [40.0, 0.0]];
+        assert_eq!(tracker_order(&l, &[0, 1, 2, 3, 4, 5]), vec![5, 0, 1, 2, 3, 4]);
     }
 }

@@ -27,7 +27,7 @@ use crate::affine::{AffineStereo, EpipolarConstraint, FitError};
 /// The stereo geometry the matcher works with: the epipolar constraint (known up to a small
 /// error) and the workspace's disparity limits; the full affine model when calibrated.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StereoGeometry {
+pub struct EpipolarGeometry {
     pub epipolar: EpipolarConstraint,
     /// A smooth correction of the linear constraint, fitted by the planner's bootstrap when
     /// the cameras are not quite affine (`None` from a calibration).
@@ -43,7 +43,7 @@ pub struct StereoGeometry {
     pub projective: Option<ProjectiveStereo>,
 }
 
-impl StereoGeometry {
+impl EpipolarGeometry {
     /// From a calibrated model: its epipolar constraint, and its calibration disparity range
     /// widened by `margin_frac` of the range plus `margin_px` on each side (objects on the
     /// table lie a little outside a cage held above it).
@@ -362,7 +362,7 @@ fn along(s: &Segment, e: P2, deg: f64) -> bool {
 }
 
 /// Enumerates candidate matches (see the module docs).
-pub fn candidates(left: &[Segment], right: &[Segment], geo: &StereoGeometry, cfg: &MatchConfig) -> Candidates {
+pub fn candidates(left: &[Segment], right: &[Segment], geo: &EpipolarGeometry, cfg: &MatchConfig) -> Candidates {
     let ef = geo.frame();
     let tol = cfg.epipolar_tol_px;
     let (el, er) = (ef.left_dir(), ef.right_dir());
@@ -452,7 +452,7 @@ pub struct Friendship {
 }
 
 /// Finds the friends among `cands` (see the module docs).
-pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &StereoGeometry, cfg: &MatchConfig) -> Vec<Friendship> {
+pub fn friends(cands: &Candidates, rel_l: &Relations, rel_r: &Relations, geo: &EpipolarGeometry, cfg: &MatchConfig) -> Vec<Friendship> {
     let ef = geo.frame();
     let mut out = Vec::new();
     for jl in &rel_l.junctions {
@@ -508,8 +508,8 @@ mod tests {
     }
 
     /// Horizontal epipolar lines: v' = v (n = (0, −1, 0, 1)/√2), disparity in [−40, 0].
-    fn rectified() -> StereoGeometry {
-        StereoGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), correction: None, disparity_px: [-40.0, 0.0], model: None, projective: None }
+    fn rectified() -> EpipolarGeometry {
+        EpipolarGeometry { epipolar: EpipolarConstraint::from_normal(Vector4::new(0.0, -1.0, 0.0, 1.0), 0.0), correction: None, disparity_px: [-40.0, 0.0], model: None, projective: None }
     }
 
     #[test]

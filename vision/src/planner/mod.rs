@@ -14,14 +14,14 @@
 //! Pure: the caller times stages through the callback of [`Planner::plan_with`].
 //!
 //! ```
-//! use handeye_vision::planner::{synth::{BoxSpec, SynthScene}, Planner, PlannerConfig, StereoGeometry};
+//! use handeye_vision::planner::{synth::{BoxSpec, SynthScene}, Planner, PlannerConfig, EpipolarGeometry};
 //! use handeye_vision::affine::AffineStereo;
 //! use nalgebra::Vector3;
 //! let scene = SynthScene::new(vec![BoxSpec { center_m: [0.0, 0.0, 0.025], size_m: [0.06, 0.05, 0.05], yaw_rad: 0.4 }]);
 //! let pair = scene.render(3);
 //! let robot: Vec<Vector3<f64>> = pair.cage.iter().map(|c| Vector3::from(c.0)).collect();
 //! let image: Vec<[f64; 4]> = pair.cage.iter().map(|c| c.1).collect();
-//! let geo = StereoGeometry::from_model(AffineStereo::fit(&robot, &image).unwrap(), 0.5, 10.0);
+//! let geo = EpipolarGeometry::from_model(AffineStereo::fit(&robot, &image).unwrap(), 0.5, 10.0);
 //! let mut planner = Planner::new(PlannerConfig::default());
 //! let plan = planner.plan(&pair.left.view(), &pair.right.view(), &geo);
 //! assert_eq!(plan.facets.len(), 3); // top and two sides
@@ -56,7 +56,7 @@ use reconstruct::Match;
 use relations::{RelationConfig, Relations};
 use segments::{Segment, SegmentConfig, SegmentDetector};
 
-pub use matching::{EpipolarCorrection, StereoGeometry};
+pub use matching::{EpipolarCorrection, EpipolarGeometry};
 
 /// All tuning of the planner; the defaults suit 640x480 views of blocks 1-2 m away.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -182,7 +182,7 @@ impl Planner {
     }
 
     /// Runs the whole pipeline.
-    pub fn plan(&mut self, left: &ImageView, right: &ImageView, geo: &StereoGeometry) -> Plan {
+    pub fn plan(&mut self, left: &ImageView, right: &ImageView, geo: &EpipolarGeometry) -> Plan {
         self.plan_with(left, right, geo, &mut |_| {})
     }
 
@@ -199,7 +199,7 @@ impl Planner {
 
     /// Runs the whole pipeline, calling `on_stage(s)` when stage `s` ends (edges and segments
     /// once per view): the time since the previous call is that stage's.
-    pub fn plan_with(&mut self, left: &ImageView, right: &ImageView, geo: &StereoGeometry, on_stage: &mut dyn FnMut(Stage)) -> Plan {
+    pub fn plan_with(&mut self, left: &ImageView, right: &ImageView, geo: &EpipolarGeometry, on_stage: &mut dyn FnMut(Stage)) -> Plan {
         let cfg = self.config;
         let ls = self.segments_of(left, on_stage);
         let rs = self.segments_of(right, on_stage);
@@ -282,13 +282,13 @@ impl Planner {
     }
 }
 
-fn match_views(ls: &[Segment], rs: &[Segment], rl: &Relations, rr: &Relations, geo: &StereoGeometry, cfg: &PlannerConfig) -> (Candidates, Vec<Friendship>) {
+fn match_views(ls: &[Segment], rs: &[Segment], rl: &Relations, rr: &Relations, geo: &EpipolarGeometry, cfg: &PlannerConfig) -> (Candidates, Vec<Friendship>) {
     let cands = matching::candidates(ls, rs, geo, &cfg.matching);
     let friends = matching::friends(&cands, rl, rr, geo, &cfg.matching);
     (cands, friends)
 }
 
-fn group_planes(ls: &[Segment], rs: &[Segment], cands: &Candidates, friends: &[Friendship], geo: &StereoGeometry, left: &ImageView, cfg: &PlannerConfig) -> Vec<Plane> {
+fn group_planes(ls: &[Segment], rs: &[Segment], cands: &Candidates, friends: &[Friendship], geo: &EpipolarGeometry, left: &ImageView, cfg: &PlannerConfig) -> Vec<Plane> {
     let ef = geo.frame();
     planes::find_planes(
         &PlaneInput { left: ls, right: rs, cands, friends, epipolar: &ef, epipolar_tol_px: cfg.matching.epipolar_tol_px, width: left.width(), height: left.height() },
@@ -325,7 +325,7 @@ fn confident_junctions(friends: &[Friendship], planes: &[Plane]) -> (Vec<[f64; 4
 /// residual dropped once) when they come from two or more planes and span three dimensions
 /// of `(u, v, u', v')` space, then a smooth correction of what the linear constraint leaves
 /// (perspective; see [`EpipolarCorrection`]). `None` with fewer than 6 points.
-fn refine_epipolar(geo: &StereoGeometry, junctions: &(Vec<[f64; 4]>, usize)) -> Option<(StereoGeometry, BootstrapReport)> {
+fn refine_epipolar(geo: &EpipolarGeometry, junctions: &(Vec<[f64; 4]>, usize)) -> Option<(EpipolarGeometry, BootstrapReport)> {
     let (pts, planes) = junctions;
     if pts.len() < 6 {
         return None;
@@ -350,10 +350,10 @@ fn refine_epipolar(geo: &StereoGeometry, junctions: &(Vec<[f64; 4]>, usize)) -> 
     let linear = EpipolarFrame::new(&epipolar);
     let residuals: Vec<(P2, f64)> = pts.iter().map(|w| ([w[0], w[1]], linear.residual([w[0], w[1]], [w[2], w[3]]))).collect();
     let mut correction = EpipolarCorrection::fit(&residuals).map(|(c, _)| c);
-    let with = |correction| StereoGeometry { epipolar, correction, ..geo.clone() };
+    let with = |correction| EpipolarGeometry { epipolar, correction, ..geo.clone() };
     // Judge on the points the refined geometry explains (within 2 px): the matches that are
     // right under it.
-    let explained = |g: &StereoGeometry| -> Vec<[f64; 4]> {
+    let explained = |g: &EpipolarGeometry| -> Vec<[f64; 4]> {
         let ef = g.frame();
         pts.iter().filter(|w| ef.residual([w[0], w[1]], [w[2], w[3]]).abs() <= 2.0).copied().collect()
     };

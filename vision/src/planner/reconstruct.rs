@@ -21,7 +21,7 @@
 
 use super::facets::Facet;
 use super::geom::{self, P2};
-use super::matching::{Candidates, EpipolarFrame, Friendship, StereoGeometry};
+use super::matching::{Candidates, EpipolarFrame, Friendship, EpipolarGeometry};
 use super::planes::{coverage, stretches_overlap, Plane, Transfer};
 use super::segments::Segment;
 
@@ -146,7 +146,7 @@ pub fn select_matches(cands: &Candidates, friends: &[Friendship], planes: &[Plan
 
 /// Reconstructs every match in place (see the module docs).
 #[allow(clippy::too_many_arguments)] // the planner's stage outputs, passed as they are
-pub fn reconstruct(matches: &mut [Match], facets: &[Facet], friends: &[Friendship], left: &[Segment], right: &[Segment], geo: &StereoGeometry, epipolar_min_angle_deg: f64, junction_gap_px: f64) {
+pub fn reconstruct(matches: &mut [Match], facets: &[Facet], friends: &[Friendship], left: &[Segment], right: &[Segment], geo: &EpipolarGeometry, epipolar_min_angle_deg: f64, junction_gap_px: f64) {
     let ef = geo.frame();
     let mut by_cand = std::collections::HashMap::with_capacity(matches.len());
     for (i, m) in matches.iter().enumerate() {
@@ -269,7 +269,7 @@ pub fn cyclopean_disparity(xl: P2, xr: P2) -> [f64; 3] {
     [(xl[0] + xr[0]) * 0.5, (xl[1] + xr[1]) * 0.5, xr[0] - xl[0]]
 }
 
-fn make(xl: [P2; 2], xr: [P2; 2], method: Method, geo: &StereoGeometry) -> Reconstruction {
+fn make(xl: [P2; 2], xr: [P2; 2], method: Method, geo: &EpipolarGeometry) -> Reconstruction {
     let cd = [cyclopean_disparity(xl[0], xr[0]), cyclopean_disparity(xl[1], xr[1])];
     let p = |k: usize| geo.robot_point(&[xl[k][0], xl[k][1], xr[k][0], xr[k][1]]);
     let robot_m = p(0).zip(p(1)).map(|(a, b)| [a, b]);

@@ -99,6 +99,12 @@ impl Canvas {
 }
 
 /// A tiny deterministic generator for test noise and random layouts.
+///
+/// Not the workspace's [`SplitMix64`](crate::rng::SplitMix64): the planner's synthetic
+/// acceptance measures (`tests/planner_synthetic.rs`: found rate over ten seeded layouts,
+/// the bootstrap's recovery) were set on this stream, and on SplitMix64's layouts they do
+/// not hold as they stand (86 % found, or a bootstrap that does not re-match). Moving these
+/// scenes to SplitMix64 means re-baselining those tests, which is a decision of its own.
 #[derive(Debug, Clone)]
 pub struct XorShift(pub u64);
 

@@ -37,7 +37,7 @@ impl FacetGoal {
     ///
     /// ```
     /// use handeye_vision::affine::AffineStereo;
-    /// use handeye_vision::servo::{AffineFrame, FacetGoal, ServoModel, StereoFrame};
+    /// use handeye_vision::servo::{ViewFrame, FacetGoal, ServoModel, StereoFrame};
     /// use nalgebra::{Matrix4x3, Vector3, Vector4};
     /// let m = Matrix4x3::new(800.0, 0.0, 150.0, 0.0, -20.0, -800.0, 780.0, -60.0, -140.0, 0.0, -25.0, -800.0);
     /// let model = ServoModel::new(&AffineStereo { m, c: Vector4::zeros(), residual_rms_px: 0.0, disparity_range_px: [0.0; 2] }).unwrap();
@@ -45,8 +45,8 @@ impl FacetGoal {
     /// let see = |d: Vector3<f64>| { let w = m * d; ([w[0], w[1]], [w[2], w[3]]) };
     /// let (o, e1, e2) = (see(Vector3::new(0.4, 0.0, 0.05)), see(Vector3::new(0.0, 0.04, 0.0)), see(Vector3::new(0.0, 0.0, 0.04)));
     /// let target = StereoFrame {
-    ///     left: AffineFrame { o: o.0, e1: e1.0, e2: e2.0 },
-    ///     right: AffineFrame { o: o.1, e1: e1.1, e2: e2.1 },
+    ///     left: ViewFrame { o: o.0, e1: e1.0, e2: e2.0 },
+    ///     right: ViewFrame { o: o.1, e1: e1.1, e2: e2.1 },
     /// };
     /// // Reference 0.1 m above the facet origin, marks around it, all in the facet's plane.
     /// let up = Vector3::new(0.0, 0.0, 0.1);

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix2, Vector2, Vector6};
 use thiserror::Error;
 
-use super::{AffineFrame, GripperView, ServoGoal, StereoFrame, StereoPoint};
+use super::{ViewFrame, GripperView, ServoGoal, StereoFrame, StereoPoint};
 
 /// Why a set of image measurements cannot be used.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
@@ -41,7 +41,7 @@ pub(crate) fn finite2(p: &[f64; 2]) -> bool {
     p[0].is_finite() && p[1].is_finite()
 }
 
-impl AffineFrame {
+impl ViewFrame {
     /// `[e1 e2]` as the columns of a 2x2 matrix.
     pub fn basis(&self) -> Matrix2<f64> {
         Matrix2::new(self.e1[0], self.e2[0], self.e1[1], self.e2[1])
@@ -75,10 +75,10 @@ impl AffineFrame {
 /// plane's affine frames in both views: `A = [e1' e2'][e1 e2]⁻¹`, `b = o' − A o`.
 ///
 /// ```
-/// use handeye_vision::servo::{AffineFrame, PlaneTransfer, StereoFrame};
+/// use handeye_vision::servo::{ViewFrame, PlaneTransfer, StereoFrame};
 /// let frames = StereoFrame {
-///     left: AffineFrame { o: [100.0, 200.0], e1: [40.0, 0.0], e2: [0.0, 40.0] },
-///     right: AffineFrame { o: [130.0, 198.0], e1: [36.0, 2.0], e2: [1.0, 41.0] },
+///     left: ViewFrame { o: [100.0, 200.0], e1: [40.0, 0.0], e2: [0.0, 40.0] },
+///     right: ViewFrame { o: [130.0, 198.0], e1: [36.0, 2.0], e2: [1.0, 41.0] },
 /// };
 /// let t = PlaneTransfer::from_frames(&frames).unwrap();
 /// // The frame's own corner (s, t) = (1, 1) transfers exactly.

@@ -91,9 +91,10 @@ pub struct StereoPoint {
     pub right: [f64; 2],
 }
 
-/// An affine frame in one view, pixels: origin `o` and basis `e1, e2`.
+/// A plane's affine frame in one view, pixels: origin `o` and basis `e1, e2`, as the servo
+/// receives it from a tracker (the tracker's own is [`crate::tracker::TemplateFrame`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct AffineFrame {
+pub struct ViewFrame {
     pub o: [f64; 2],
     pub e1: [f64; 2],
     pub e2: [f64; 2],
@@ -102,8 +103,8 @@ pub struct AffineFrame {
 /// A plane's affine frames in both views (e.g. a facet's two trackers).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StereoFrame {
-    pub left: AffineFrame,
-    pub right: AffineFrame,
+    pub left: ViewFrame,
+    pub right: ViewFrame,
 }
 
 /// What the servo sees of the gripper each step (see the module docs).
@@ -158,16 +159,16 @@ impl ServoGoal {
     }
 }
 
-/// A relative move of the tool: the servo's output (wire `MoveBy`).
+/// A relative move of the tool in the robot frame: the servo's output (wire `MoveBy`).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Motion {
+pub struct ToolMotion {
     /// Tool point displacement, robot frame, metres.
     pub translation_m: Vector3<f64>,
     /// Change of yaw about `+z`, radians.
     pub yaw_rad: f64,
 }
 
-impl Motion {
+impl ToolMotion {
     fn from_q(q: &Vector4<f64>) -> Self {
         Self { translation_m: Vector3::new(q[0], q[1], q[2]), yaw_rad: q[3] }
     }
@@ -268,15 +269,15 @@ impl Default for ServoConfig {
 /// A [`ServoConfig`] field out of range.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 #[error("servo config: {field} = {value} is out of range ({expected})")]
-pub struct ConfigError {
+pub struct ServoConfigError {
     pub field: &'static str,
     pub value: f64,
     pub expected: &'static str,
 }
 
 impl ServoConfig {
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        let check = |field, value: f64, ok: bool, expected| if ok && value.is_finite() { Ok(()) } else { Err(ConfigError { field, value, expected }) };
+    pub fn validate(&self) -> Result<(), ServoConfigError> {
+        let check = |field, value: f64, ok: bool, expected| if ok && value.is_finite() { Ok(()) } else { Err(ServoConfigError { field, value, expected }) };
         check("gain", self.gain, self.gain > 0.0 && self.gain < 1.0, "0 < gain < 1")?;
         check("max_step_m", self.max_step_m, self.max_step_m > 0.0, "> 0")?;
         check("max_yaw_step_rad", self.max_yaw_step_rad, self.max_yaw_step_rad > 0.0, "> 0")?;
@@ -338,11 +339,11 @@ pub struct ServoStep {
     pub step: u32,
     pub outcome: StepOutcome,
     /// The move to send (zero when `outcome` is `Failed`).
-    pub motion: Motion,
+    pub motion: ToolMotion,
     /// The image error, when it could be measured.
     pub measurement: Option<Measurement>,
     /// `Ĵ⁺ e`: estimated offset of the gripper from the goal pose (NaN when not computed).
-    pub offset: Motion,
+    pub offset: ToolMotion,
     /// Weighted residual `|W (e − Ĵ Ĵ⁺ e)|`, px: the part of the error no (x, y, z, yaw) move
     /// can remove (e.g. a facet tilted from vertical).
     pub unreachable_px: f64,
@@ -387,7 +388,7 @@ pub struct CoplanarityServo {
 }
 
 impl CoplanarityServo {
-    pub fn new(model: ServoModel, config: ServoConfig) -> Result<Self, ConfigError> {
+    pub fn new(model: ServoModel, config: ServoConfig) -> Result<Self, ServoConfigError> {
         config.validate()?;
         Ok(Self::fresh(model, config))
     }
@@ -441,7 +442,7 @@ impl CoplanarityServo {
     /// Tells the servo the motion the robot really made since the last step, when it differs
     /// from the one commanded (e.g. clipped by the controller). Used by the Broyden update and
     /// the convergence average.
-    pub fn set_executed_motion(&mut self, motion: &Motion) {
+    pub fn set_executed_motion(&mut self, motion: &ToolMotion) {
         if let Some((_, q)) = self.previous.as_mut() {
             self.moved += motion.q() - *q;
             *q = motion.q();
@@ -461,11 +462,11 @@ impl CoplanarityServo {
 
     /// One look-and-move step: measure, decide, return the move to make.
     pub fn step(&mut self, target: &StereoFrame, gripper: &GripperView, goal: &ServoGoal) -> ServoStep {
-        let nan_motion = Motion { translation_m: Vector3::repeat(f64::NAN), yaw_rad: f64::NAN };
+        let nan_motion = ToolMotion { translation_m: Vector3::repeat(f64::NAN), yaw_rad: f64::NAN };
         let mut out = ServoStep {
             step: self.steps,
             outcome: StepOutcome::Move,
-            motion: Motion::default(),
+            motion: ToolMotion::default(),
             measurement: None,
             offset: nan_motion,
             unreachable_px: f64::NAN,
@@ -539,7 +540,7 @@ impl CoplanarityServo {
         if !q_offset.iter().all(|x| x.is_finite()) {
             return self.outcome(fail(out, ServoFailure::NotFinite));
         }
-        out.offset = Motion::from_q(&q_offset);
+        out.offset = ToolMotion::from_q(&q_offset);
 
         // Convergence and divergence, judged on the estimated pose offset.
         let offset_m = q_scaled.norm();
@@ -579,7 +580,7 @@ impl CoplanarityServo {
             let agree = spread_m <= self.config.converged_spread * self.config.converged_m && spread_rad <= self.config.converged_spread * self.config.converged_rad;
             if t <= self.config.converged_m && mean[3].abs() <= self.config.converged_rad && agree {
                 out.outcome = StepOutcome::Converged;
-                out.motion = Motion::from_q(&-mean);
+                out.motion = ToolMotion::from_q(&-mean);
                 self.moved -= mean;
                 self.previous = Some((m.error, -mean));
                 return out;
@@ -593,7 +594,7 @@ impl CoplanarityServo {
             q *= shrink;
             out.clamped = true;
         }
-        out.motion = Motion::from_q(&q);
+        out.motion = ToolMotion::from_q(&q);
         self.moved += q;
         self.previous = Some((m.error, q));
         out

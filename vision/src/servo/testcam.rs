@@ -1,39 +1,10 @@
-//! Test support: pinhole cameras and a deterministic random source, so the geometry modules
-//! can be tested against *perspective* images (the affine model is only an approximation
-//! of them, as with real cameras).
+//! Test support: pinhole cameras, so the geometry modules can be tested against
+//! *perspective* images (the affine model is only an approximation of them, as with real
+//! cameras). Noise comes from [`SplitMix64`](crate::rng::SplitMix64).
 
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
-use super::{AffineFrame, StereoPoint};
-
-/// SplitMix64: small, deterministic, good enough for test noise.
-pub(crate) struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u1 = self.uniform(1e-12, 1.0);
-        let u2 = self.uniform(0.0, 1.0);
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
-}
+use super::{ViewFrame, StereoPoint};
 
 /// A pinhole camera: `x` right, `y` down, `z` forward; pixels.
 #[derive(Debug, Clone, Copy)]
@@ -103,7 +74,7 @@ pub(crate) fn cage() -> Vec<Vector3<f64>> {
 
 /// Least-squares affine frame `o + s e1 + t e2` through image points with known `(s, t)`:
 /// what an affine contour tracker converges to on a perspective image of a polygon.
-pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> AffineFrame {
+pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> ViewFrame {
     let mut ata = Matrix3::zeros();
     let mut atx = nalgebra::Matrix3x2::zeros();
     for (p, c) in points.iter().zip(st) {
@@ -112,5 +83,5 @@ pub(crate) fn fit_frame(points: &[[f64; 2]], st: &[[f64; 2]]) -> AffineFrame {
         atx += a * nalgebra::RowVector2::new(p[0], p[1]);
     }
     let sol = ata.try_inverse().expect("frame points span a plane") * atx;
-    AffineFrame { o: [sol[(0, 0)], sol[(0, 1)]], e1: [sol[(1, 0)], sol[(1, 1)]], e2: [sol[(2, 0)], sol[(2, 1)]] }
+    ViewFrame { o: [sol[(0, 0)], sol[(0, 1)]], e1: [sol[(1, 0)], sol[(1, 1)]], e2: [sol[(2, 0)], sol[(2, 1)]] }
 }

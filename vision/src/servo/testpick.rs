@@ -9,7 +9,8 @@
 
 use nalgebra::{Matrix2, Vector2, Vector3};
 
-use super::testcam::{fit_frame, PinholeCamera, Rig, Rng};
+use super::testcam::{fit_frame, PinholeCamera, Rig};
+use crate::rng::SplitMix64;
 use super::*;
 use crate::affine::AffineStereo;
 
@@ -64,7 +65,7 @@ impl Pose {
         self.reference() + self.a() * ab[0] + Vector3::z() * ab[1]
     }
     /// The servo's motion: the reference point translated, the yaw turned about it.
-    fn apply(&mut self, m: &Motion) {
+    fn apply(&mut self, m: &ToolMotion) {
         let r = self.reference() + m.translation_m;
         self.yaw += m.yaw_rad;
         self.tool = r + self.lever();
@@ -175,7 +176,7 @@ fn facet_normal(model: &ServoModel, target: &StereoFrame) -> Vector3<f64> {
 
 pub(super) fn run_pick(p: &Pick) -> PickOutcome {
     let rig = rig();
-    let mut rng = Rng::new(p.seed);
+    let mut rng = SplitMix64::new(p.seed);
     let cage: Vec<Vector3<f64>> = CAGE.iter().map(|x| Vector3::from(*x)).collect();
     let global = ServoModel::new(&fit_model(&rig, &cage, CALIBRATION_YAW_RAD)).unwrap();
     let mut left: Vec<[f64; 2]> = p.face.0.iter().map(|c| rig.left.project(c)).collect();
@@ -185,8 +186,8 @@ pub(super) fn run_pick(p: &Pick) -> PickOutcome {
     left[last] = [left[last][0] + d.x, left[last][1] + d.y];
     let st = template_st(&left);
     // The target as a tracker reports it, averaged over `k` frames.
-    let observe = |rng: &mut Rng, k: usize| {
-        let mut mean = [AffineFrame::default(); 2];
+    let observe = |rng: &mut SplitMix64, k: usize| {
+        let mut mean = [ViewFrame::default(); 2];
         for _ in 0..k {
             for (m, corners) in mean.iter_mut().zip([&left, &right]) {
                 let noisy: Vec<[f64; 2]> = corners.iter().map(|c| [c[0] + p.noise_px * rng.normal(), c[1] + p.noise_px * rng.normal()]).collect();

@@ -3,7 +3,8 @@
 
 use nalgebra::{Matrix4x3, Vector2, Vector3, Vector4, Vector6};
 
-use super::testcam::{Rig, Rng};
+use super::testcam::Rig;
+use crate::rng::SplitMix64;
 use super::testpick::{run_pick, worst, Face, Pick};
 use super::testscene::*;
 use super::*;
@@ -106,7 +107,7 @@ fn broyden_learns_a_stale_model_and_still_converges() {
     // Both cameras knocked and the left one zoomed by 30% after calibration: the model's
     // Jacobian is badly off. Broyden's correction must predict the error changes better.
     let run_stale = |broyden: bool| {
-        let mut rng = Rng::new(3);
+        let mut rng = SplitMix64::new(3);
         let facet = Facet::standard();
         let mut rig = Rig::standard(1500.0);
         let mut pose = Pose::start(&facet);
@@ -165,7 +166,7 @@ fn jacobian_matches_finite_differences_for_affine_cameras() {
     let k = facet.corners();
     let frame = |pick: fn(&StereoPoint) -> [f64; 2]| {
         let (o, a, b) = (pick(&project(&k[0])), pick(&project(&k[1])), pick(&project(&k[3])));
-        AffineFrame { o, e1: [a[0] - o[0], a[1] - o[1]], e2: [b[0] - o[0], b[1] - o[1]] }
+        ViewFrame { o, e1: [a[0] - o[0], a[1] - o[1]], e2: [b[0] - o[0], b[1] - o[1]] }
     };
     let target = StereoFrame { left: frame(|p| p.left), right: frame(|p| p.right) };
     let view = |pose: &Pose| {
@@ -207,7 +208,7 @@ fn jacobian_matches_finite_differences_for_affine_cameras() {
 #[test]
 fn plane_transfer_and_parallax_conventions() {
     let rig = Rig::standard(1500.0);
-    let mut rng = Rng::new(1);
+    let mut rng = SplitMix64::new(1);
     let model = ServoModel::new(&calibrate(&rig, 0.0, &mut rng, 0.0)).unwrap();
     let facet = Facet::standard();
     let target = observe_target(&rig, &facet, &mut rng, 0.0);
@@ -245,7 +246,7 @@ fn plane_transfer_and_parallax_conventions() {
 /// A servo at the start pose of the standard scene, with its inputs.
 fn standard_inputs() -> (ServoModel, StereoFrame, GripperView, ServoGoal, Rig) {
     let rig = Rig::standard(1500.0);
-    let mut rng = Rng::new(1);
+    let mut rng = SplitMix64::new(1);
     let facet = Facet::standard();
     let pose = Pose::start(&facet);
     let model = ServoModel::new(&calibrate(&rig, pose.yaw_rad, &mut rng, 0.0)).unwrap();
@@ -267,7 +268,7 @@ fn a_wrong_sign_model_diverges_and_the_failure_sticks() {
     // A model fitted against mirrored robot coordinates: every translation column has the
     // wrong sign, so each step moves away from the goal.
     let rig = Rig::standard(1500.0);
-    let mut rng = Rng::new(1);
+    let mut rng = SplitMix64::new(1);
     let facet = Facet::standard();
     let mut pose = Pose::start(&facet);
     let good = calibrate(&rig, pose.yaw_rad, &mut rng, 0.0);
@@ -278,7 +279,7 @@ fn a_wrong_sign_model_diverges_and_the_failure_sticks() {
     let failed = loop {
         let s = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
         if let StepOutcome::Failed(f) = s.outcome {
-            assert_eq!(s.motion, Motion::default());
+            assert_eq!(s.motion, ToolMotion::default());
             break (f, s.step);
         }
         pose.apply(&s.motion);
@@ -289,7 +290,7 @@ fn a_wrong_sign_model_diverges_and_the_failure_sticks() {
     // Failed stays failed, with no motion, until reset.
     let again = servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal);
     assert_eq!(failure(&again), failed.0);
-    assert_eq!(again.motion, Motion::default());
+    assert_eq!(again.motion, ToolMotion::default());
     servo.reset();
     assert_eq!(servo.steps(), 0);
     assert_eq!(servo.step(&target, &observe_gripper(&rig, &pose, &mut rng, 0.0), &goal).outcome, StepOutcome::Move);
@@ -476,14 +477,14 @@ fn the_goal_height_comes_from_the_robot_not_the_model() {
 fn scattered_estimates_do_not_converge_on_their_mean() {
     let rig = Rig::standard(1500.0);
     let facet = Facet::standard();
-    let mut rng = Rng::new(1);
+    let mut rng = SplitMix64::new(1);
     let start = Pose::goal(&facet);
     let model = ServoModel::new(&calibrate(&rig, start.yaw_rad, &mut rng, 0.0)).unwrap();
     let target = observe_target(&rig, &facet, &mut rng, 0.0);
     let taught = ServoGoal::teach(&model, &target, &observe_gripper(&rig, &start, &mut rng, 0.0)).unwrap();
     let px_per_mm = model.parallax_for_offset(&target, &(0.001 * facet.normal)).unwrap().abs();
     let run = |jitter_mm: f64, converged_spread: f64| {
-        let mut rng = Rng::new(2);
+        let mut rng = SplitMix64::new(2);
         let config = ServoConfig { converged_spread, max_steps: 30, ..ServoConfig::default() };
         let mut servo = CoplanarityServo::new(model, config).unwrap();
         let mut pose = start;

@@ -4,7 +4,8 @@
 
 use nalgebra::Vector3;
 
-use super::testcam::{cage, fit_frame, PinholeCamera, Rig, Rng};
+use super::testcam::{cage, fit_frame, PinholeCamera, Rig};
+use crate::rng::SplitMix64;
 use super::*;
 use crate::affine::AffineStereo;
 
@@ -112,7 +113,7 @@ impl Pose {
         Vector3::new(self.yaw_rad.cos(), self.yaw_rad.sin(), 0.0)
     }
 
-    pub(super) fn apply(&mut self, m: &Motion) {
+    pub(super) fn apply(&mut self, m: &ToolMotion) {
         self.tool_m += m.translation_m;
         self.yaw_rad += m.yaw_rad;
     }
@@ -134,20 +135,20 @@ impl Pose {
     }
 }
 
-pub(super) fn noisy(p: [f64; 2], rng: &mut Rng, noise_px: f64) -> [f64; 2] {
-    [p[0] + rng.uniform(-noise_px, noise_px), p[1] + rng.uniform(-noise_px, noise_px)]
+pub(super) fn noisy(p: [f64; 2], rng: &mut SplitMix64, noise_px: f64) -> [f64; 2] {
+    [p[0] + rng.range(-noise_px, noise_px), p[1] + rng.range(-noise_px, noise_px)]
 }
 
 /// What an affine contour tracker reports for a planar quadrilateral: the least-squares
 /// affine frame of `CONTOUR_POINTS` points around its outline, each seen with uniform
 /// `±noise_px` error per coordinate.
-pub(super) fn track(cam: &PinholeCamera, at_st: impl Fn(&[f64; 2]) -> Vector3<f64>, rng: &mut Rng, noise_px: f64) -> AffineFrame {
+pub(super) fn track(cam: &PinholeCamera, at_st: impl Fn(&[f64; 2]) -> Vector3<f64>, rng: &mut SplitMix64, noise_px: f64) -> ViewFrame {
     let st = outline_st(CONTOUR_POINTS);
     let pts: Vec<[f64; 2]> = st.iter().map(|c| noisy(cam.project(&at_st(c)), rng, noise_px)).collect();
     fit_frame(&pts, &st)
 }
 
-pub(super) fn observe_target(rig: &Rig, facet: &Facet, rng: &mut Rng, noise_px: f64) -> StereoFrame {
+pub(super) fn observe_target(rig: &Rig, facet: &Facet, rng: &mut SplitMix64, noise_px: f64) -> StereoFrame {
     let c = facet.corners();
     let at = |st: &[f64; 2]| c[0] + st[0] * (c[1] - c[0]) + st[1] * (c[3] - c[0]);
     StereoFrame { left: track(&rig.left, at, rng, noise_px), right: track(&rig.right, at, rng, noise_px) }
@@ -155,7 +156,7 @@ pub(super) fn observe_target(rig: &Rig, facet: &Facet, rng: &mut Rng, noise_px: 
 
 /// The gripper as the daemon will see it: the plate's tracked frame in each view, and the
 /// marks, reference point and axis (`e1`) read off it.
-pub(super) fn observe_gripper(rig: &Rig, pose: &Pose, rng: &mut Rng, noise_px: f64) -> GripperView {
+pub(super) fn observe_gripper(rig: &Rig, pose: &Pose, rng: &mut SplitMix64, noise_px: f64) -> GripperView {
     let at = |st: &[f64; 2]| pose.world(&plate_local(st));
     let (l, r) = (track(&rig.left, at, rng, noise_px), track(&rig.right, at, rng, noise_px));
     let see = |st: &[f64; 2]| StereoPoint { left: l.point(st), right: r.point(st) };
@@ -164,7 +165,7 @@ pub(super) fn observe_gripper(rig: &Rig, pose: &Pose, rng: &mut Rng, noise_px: f
 
 /// Self-calibration: the tool visits the cage at yaw `yaw_rad` while the reference point is
 /// tracked.
-pub(super) fn calibrate(rig: &Rig, yaw_rad: f64, rng: &mut Rng, noise_px: f64) -> AffineStereo {
+pub(super) fn calibrate(rig: &Rig, yaw_rad: f64, rng: &mut SplitMix64, noise_px: f64) -> AffineStereo {
     let robot = cage();
     let seen: Vec<[f64; 4]> = robot
         .iter()
@@ -213,7 +214,7 @@ pub(super) struct Outcome {
 }
 
 pub(super) fn run(sc: &Scenario) -> Outcome {
-    let mut rng = Rng::new(sc.seed);
+    let mut rng = SplitMix64::new(sc.seed);
     let mut rig = Rig::standard(sc.f_px);
     let goal_pose = Pose::goal(&sc.facet);
     let mut pose = Pose::start(&sc.facet);

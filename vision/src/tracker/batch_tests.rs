@@ -4,35 +4,18 @@
 use super::super::search::reference::{search_side, SideScratch};
 use super::*;
 use crate::image::ImageView;
-
-/// A small xorshift generator: the tests are repeatable.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
+use crate::rng::SplitMix64;
 
 /// A textured image: bands, blobs and noise, with plateaus (ties are where an off-by-one
 /// would show), in a buffer whose stride exceeds its width.
-fn image(rng: &mut Rng, width: usize, height: usize, stride: usize) -> Vec<u8> {
+fn image(rng: &mut SplitMix64, width: usize, height: usize, stride: usize) -> Vec<u8> {
     let mut data = vec![0u8; stride * (height - 1) + width];
-    let (fx, fy, phase) = (rng.unit() * 0.7, rng.unit() * 0.7, rng.unit() * 6.0);
+    let (fx, fy, phase) = (rng.next_f64() * 0.7, rng.next_f64() * 0.7, rng.next_f64() * 6.0);
     for y in 0..height {
         for x in 0..width {
             let wave = ((x as f64 * fx + y as f64 * fy + phase).sin() * 90.0) as i32;
             let step = if (x / 7 + y / 5) % 3 == 0 { 60 } else { 0 };
-            let noise = (rng.next() % 9) as i32 - 4;
+            let noise = (rng.next_u64() % 9) as i32 - 4;
             let v = (128 + wave + step + if rng.below(4) == 0 { 0 } else { noise }).clamp(0, 255);
             data[y * stride + x] = v as u8;
         }
@@ -42,7 +25,7 @@ fn image(rng: &mut Rng, width: usize, height: usize, stride: usize) -> Vec<u8> {
 
 #[test]
 fn matches_the_line_by_line_search_bit_for_bit() {
-    let mut rng = Rng(0x1234_5678_9abc_def1);
+    let mut rng = SplitMix64::new(0x1234_5678_9abc_def1);
     let mut search = ContourSearch::new();
     let mut checked = (0usize, 0usize, 0usize);
     for round in 0..160 {
@@ -55,7 +38,7 @@ fn matches_the_line_by_line_search_bit_for_bit() {
         // image's edges, one not finite).
         let sides: Vec<SideGeometry> = (0..1 + rng.below(5))
             .map(|_| {
-                let a = rng.unit() * std::f64::consts::TAU;
+                let a = rng.next_f64() * std::f64::consts::TAU;
                 SideGeometry::new([a.cos(), a.sin()], search_px)
             })
             .collect();
@@ -63,16 +46,16 @@ fn matches_the_line_by_line_search_bit_for_bit() {
         let mut side_of: Vec<u16> = (0..n).map(|_| rng.below(sides.len()) as u16).collect();
         side_of.sort_unstable();
         // Most points well inside, some anywhere near the image.
-        let place = |size: usize, rng: &mut Rng| {
-            if rng.below(6) == 0 { rng.unit() * (size as f64 + 20.0) - 10.0 } else { size as f64 * (0.25 + 0.5 * rng.unit()) }
+        let place = |size: usize, rng: &mut SplitMix64| {
+            if rng.below(6) == 0 { rng.next_f64() * (size as f64 + 20.0) - 10.0 } else { size as f64 * (0.25 + 0.5 * rng.next_f64()) }
         };
         let xs: Vec<f64> = (0..n).map(|_| place(width, &mut rng)).collect();
         let mut ys: Vec<f64> = (0..n).map(|_| place(height, &mut rng)).collect();
         if round % 17 == 3 {
             ys[0] = f64::NAN;
         }
-        let reference: Vec<f32> = (0..n).map(|_| if rng.below(5) == 0 { -1.0 } else { rng.unit() as f32 * 255.0 }).collect();
-        let contrast: Vec<f32> = (0..n).map(|_| (rng.unit() as f32 - 0.5) * 80.0).collect();
+        let reference: Vec<f32> = (0..n).map(|_| if rng.below(5) == 0 { -1.0 } else { rng.next_f64() as f32 * 255.0 }).collect();
+        let contrast: Vec<f32> = (0..n).map(|_| (rng.next_f64() as f32 - 0.5) * 80.0).collect();
         let signs = match round % 4 {
             0 => SignRule::Fixed(0),
             1 => SignRule::Fixed(1),

@@ -176,7 +176,7 @@ impl Default for TrackerConfig {
 /// A setting outside its valid range.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[error("tracker setting `{field}` = {value} is invalid: {expected}")]
-pub struct ConfigError {
+pub struct TrackerConfigError {
     pub field: &'static str,
     pub value: f64,
     pub expected: &'static str,
@@ -184,9 +184,9 @@ pub struct ConfigError {
 
 impl TrackerConfig {
     /// Checks every field; the error names the first bad one.
-    pub fn validate(&self) -> Result<(), ConfigError> {
+    pub fn validate(&self) -> Result<(), TrackerConfigError> {
         let check = |ok: bool, field: &'static str, value: f64, expected: &'static str| {
-            if ok { Ok(()) } else { Err(ConfigError { field, value, expected }) }
+            if ok { Ok(()) } else { Err(TrackerConfigError { field, value, expected }) }
         };
         let unit = |v: f64| (0.0..=1.0).contains(&v);
         check(self.points >= super::contour::MIN_POINTS && self.points <= 4096, "points", self.points as f64, "12..=4096")?;

@@ -4,7 +4,7 @@
 use nalgebra::Vector2;
 use thiserror::Error;
 
-use super::frame::AffineFrame;
+use super::frame::TemplateFrame;
 
 /// Why a polygon cannot become a tracker template.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -67,7 +67,7 @@ impl Template {
         corners_px: &[[f64; 2]],
         n_points: usize,
         corner_margin: f64,
-    ) -> Result<(Self, AffineFrame), TemplateError> {
+    ) -> Result<(Self, TemplateFrame), TemplateError> {
         let mut template = Self::with_capacity(corners_px.len(), n_points);
         let frame = template.rebuild_from_polygon_px(corners_px, n_points, corner_margin)?;
         Ok((template, frame))
@@ -77,7 +77,7 @@ impl Template {
     /// points are to be spaced evenly (e.g. the gripper's known face in its own frame).
     pub fn from_template_corners(
         corners_st: &[[f64; 2]],
-        reference: &AffineFrame,
+        reference: &TemplateFrame,
         n_points: usize,
         corner_margin: f64,
     ) -> Result<Self, TemplateError> {
@@ -104,7 +104,7 @@ impl Template {
         corners_px: &[[f64; 2]],
         n_points: usize,
         corner_margin: f64,
-    ) -> Result<AffineFrame, TemplateError> {
+    ) -> Result<TemplateFrame, TemplateError> {
         validate_polygon(corners_px)?;
         let n = corners_px.len();
         let c = |i: usize| Vector2::new(corners_px[i % n][0], corners_px[i % n][1]);
@@ -122,7 +122,7 @@ impl Template {
         if sin < 0.2 {
             (e1, e2) = principal_axes(corners_px);
         }
-        let frame = AffineFrame::new(origin, e1, e2);
+        let frame = TemplateFrame::new(origin, e1, e2);
         self.rebuild(corners_px, &frame, n_points, corner_margin)?;
         Ok(frame)
     }
@@ -131,7 +131,7 @@ impl Template {
     fn rebuild(
         &mut self,
         corners_px: &[[f64; 2]],
-        frame: &AffineFrame,
+        frame: &TemplateFrame,
         n_points: usize,
         corner_margin: f64,
     ) -> Result<(), TemplateError> {

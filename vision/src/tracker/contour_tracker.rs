@@ -2,11 +2,11 @@
 
 use nalgebra::{Matrix2, Vector2};
 
-use super::config::{ConfigError, EdgeSign, TrackerConfig};
+use super::config::{TrackerConfigError, EdgeSign, TrackerConfig};
 use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
 use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
-use super::frame::{AffineFrame, Placement};
+use super::frame::{TemplateFrame, Placement};
 use super::batch::{ContourSearch, SearchSettings};
 use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule};
 use super::state::{Confidence, LostReason, TrackState};
@@ -16,7 +16,7 @@ use crate::image::ImageView;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TrackerError {
     #[error(transparent)]
-    Config(#[from] ConfigError),
+    Config(#[from] TrackerConfigError),
     #[error(transparent)]
     Template(#[from] TemplateError),
 }
@@ -116,7 +116,7 @@ impl ContourTracker {
 
     /// A tracker for a template built in its own coordinates (e.g. the gripper's face with its
     /// marks), placed at `frame`.
-    pub fn from_template(config: TrackerConfig, template: Template, frame: AffineFrame) -> Result<Self, TrackerError> {
+    pub fn from_template(config: TrackerConfig, template: Template, frame: TemplateFrame) -> Result<Self, TrackerError> {
         config.validate()?;
         if template.points().len() < super::contour::MIN_POINTS {
             return Err(TemplateError::TooFewPoints { min: super::contour::MIN_POINTS, got: template.points().len() }.into());
@@ -127,7 +127,7 @@ impl ContourTracker {
         Ok(Self::with_template(config, template, frame))
     }
 
-    fn with_template(config: TrackerConfig, template: Template, frame: AffineFrame) -> Self {
+    fn with_template(config: TrackerConfig, template: Template, frame: TemplateFrame) -> Self {
         let n = template.points().len().max(config.points);
         let sides = template.sides();
         let mut tracker = Self {
@@ -168,7 +168,7 @@ impl ContourTracker {
     }
 
     /// Resets state, learning and velocity and places the template at `frame`.
-    fn restart(&mut self, frame: AffineFrame) {
+    fn restart(&mut self, frame: TemplateFrame) {
         let n = self.template.points().len();
         self.placement = Placement::affine(frame);
         self.initial_basis_inv = frame.basis().try_inverse().unwrap_or_else(Matrix2::identity);
@@ -205,7 +205,7 @@ impl ContourTracker {
     }
 
     /// Re-initialises the same template at another frame (e.g. handed over from the planner).
-    pub fn reinit_at(&mut self, frame: AffineFrame) -> Result<(), TemplateError> {
+    pub fn reinit_at(&mut self, frame: TemplateFrame) -> Result<(), TemplateError> {
         if !frame.is_finite() || frame.det() == 0.0 {
             return Err(TemplateError::Degenerate("the frame is singular"));
         }
@@ -479,7 +479,7 @@ impl ContourTracker {
             return Some(LostReason::FlippedBasis);
         }
         let area_ratio = det / self.initial_det;
-        let deformation = AffineFrame::new(
+        let deformation = TemplateFrame::new(
             Vector2::zeros(),
             (frame.basis() * self.initial_basis_inv).column(0).into(),
             (frame.basis() * self.initial_basis_inv).column(1).into(),
@@ -548,7 +548,7 @@ impl ContourTracker {
 
     /// The current affine frame (the last good one once lost). With the projective model it
     /// is the contour's local affine frame at the template origin.
-    pub fn frame(&self) -> AffineFrame {
+    pub fn frame(&self) -> TemplateFrame {
         self.placement.frame
     }
 

@@ -64,21 +64,21 @@ impl PredictiveFilter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tracker::AffineFrame;
+    use crate::tracker::TemplateFrame;
     use nalgebra::Vector2;
 
     #[test]
     fn learns_a_constant_velocity_and_scales_prediction_by_real_time() {
         let mut f = PredictiveFilter::new(0.5, 0.5, 100.0);
         let v = Vector2::new(30.0, -12.0); // px/s
-        let mut frame = AffineFrame::new(Vector2::new(100.0, 100.0), Vector2::new(10.0, 0.0), Vector2::new(0.0, 10.0));
+        let mut frame = TemplateFrame::new(Vector2::new(100.0, 100.0), Vector2::new(10.0, 0.0), Vector2::new(0.0, 10.0));
         let mut time = 0.0;
         // Irregular frame intervals.
         for k in 0..60 {
             let dt = [0.02, 0.033, 0.05][k % 3];
             time += dt;
             let predicted = f.predict(&Placement::affine(frame), dt);
-            let truth = AffineFrame { origin: Vector2::new(100.0, 100.0) + v * time, ..frame };
+            let truth = TemplateFrame { origin: Vector2::new(100.0, 100.0) + v * time, ..frame };
             f.correct(&predicted, &Placement::affine(truth), dt);
             frame = truth;
         }
@@ -91,8 +91,8 @@ mod tests {
     #[test]
     fn prediction_step_is_limited() {
         let mut f = PredictiveFilter::new(1.0, 1.0, 5.0);
-        let a = Placement::affine(AffineFrame::new(Vector2::zeros(), Vector2::new(1.0, 0.0), Vector2::new(0.0, 1.0)));
-        let b = Placement::affine(AffineFrame { origin: Vector2::new(100.0, 0.0), ..a.frame });
+        let a = Placement::affine(TemplateFrame::new(Vector2::zeros(), Vector2::new(1.0, 0.0), Vector2::new(0.0, 1.0)));
+        let b = Placement::affine(TemplateFrame { origin: Vector2::new(100.0, 0.0), ..a.frame });
         f.correct(&a, &b, 0.1); // 1000 px/s
         let p = f.predict(&b, 0.1);
         assert!(((p.frame.origin - b.frame.origin).norm() - 5.0).abs() < 1e-9);

@@ -3,23 +3,24 @@
 
 use nalgebra::{Matrix2, Matrix3, Vector2};
 
-/// Origin and basis of a tracker's affine frame, in image pixels (`u` right, `v` down).
+/// Origin and basis of a tracker's affine frame, in image pixels (`u` right, `v` down): where
+/// its template's coordinates `(s, t)` lie in the image.
 ///
 /// The servo uses it both ways: gripper marks are placed in the gripper tracker's frame
 /// ([`image_from_template`](Self::image_from_template)), and the gripper point is expressed in
 /// the target tracker's frame ([`template_from_image`](Self::template_from_image)).
 ///
 /// ```
-/// use handeye_vision::tracker::AffineFrame;
+/// use handeye_vision::tracker::TemplateFrame;
 /// use nalgebra::Vector2;
-/// let frame = AffineFrame::new(Vector2::new(100.0, 50.0), Vector2::new(20.0, 0.0), Vector2::new(5.0, 10.0));
+/// let frame = TemplateFrame::new(Vector2::new(100.0, 50.0), Vector2::new(20.0, 0.0), Vector2::new(5.0, 10.0));
 /// let x = frame.image_from_template(Vector2::new(0.5, -1.0));
 /// assert_eq!(x, Vector2::new(105.0, 40.0));
 /// let st = frame.template_from_image(x).unwrap();
 /// assert!((st - Vector2::new(0.5, -1.0)).norm() < 1e-12);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AffineFrame {
+pub struct TemplateFrame {
     /// Local origin `o`, pixels.
     pub origin: Vector2<f64>,
     /// First basis vector `e1`, pixels per unit of `s`.
@@ -28,7 +29,7 @@ pub struct AffineFrame {
     pub e2: Vector2<f64>,
 }
 
-impl AffineFrame {
+impl TemplateFrame {
     pub fn new(origin: Vector2<f64>, e1: Vector2<f64>, e2: Vector2<f64>) -> Self {
         Self { origin, e1, e2 }
     }
@@ -100,9 +101,9 @@ impl AffineFrame {
 /// `[e1 e2]`, so the servo's affine reasoning applies unchanged near the origin.
 ///
 /// ```
-/// use handeye_vision::tracker::{AffineFrame, Placement};
+/// use handeye_vision::tracker::{TemplateFrame, Placement};
 /// use nalgebra::Vector2;
-/// let frame = AffineFrame::new(Vector2::new(100.0, 50.0), Vector2::new(20.0, 0.0), Vector2::new(0.0, 20.0));
+/// let frame = TemplateFrame::new(Vector2::new(100.0, 50.0), Vector2::new(20.0, 0.0), Vector2::new(0.0, 20.0));
 /// let p = Placement { frame, perspective: Vector2::new(0.1, 0.0) };
 /// let x = p.image_from_template(Vector2::new(1.0, 1.0));
 /// assert!((x - Vector2::new(100.0 + 20.0 / 1.1, 50.0 + 20.0 / 1.1)).norm() < 1e-12);
@@ -111,14 +112,14 @@ impl AffineFrame {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
     /// The local affine frame at the template origin.
-    pub frame: AffineFrame,
+    pub frame: TemplateFrame,
     /// Perspective term `w`, per unit of template coordinates (0 for an affine contour).
     pub perspective: Vector2<f64>,
 }
 
 impl Placement {
     /// An affine placement (no perspective).
-    pub fn affine(frame: AffineFrame) -> Self {
+    pub fn affine(frame: TemplateFrame) -> Self {
         Self { frame, perspective: Vector2::zeros() }
     }
 
@@ -161,7 +162,7 @@ impl Placement {
         let o = Vector2::new(h[(0, 2)], h[(1, 2)]);
         let w = Vector2::new(h[(2, 0)], h[(2, 1)]);
         let e = Matrix2::new(h[(0, 0)], h[(0, 1)], h[(1, 0)], h[(1, 1)]) - o * w.transpose();
-        let p = Self { frame: AffineFrame::new(o, e.column(0).into(), e.column(1).into()), perspective: w };
+        let p = Self { frame: TemplateFrame::new(o, e.column(0).into(), e.column(1).into()), perspective: w };
         (p.frame.is_finite() && w.iter().all(|v| v.is_finite())).then_some(p)
     }
 
@@ -187,7 +188,7 @@ impl Placement {
 
     pub(crate) fn from_params(p: [f64; 8]) -> Self {
         Self {
-            frame: AffineFrame::new(Vector2::new(p[0], p[1]), Vector2::new(p[2], p[3]), Vector2::new(p[4], p[5])),
+            frame: TemplateFrame::new(Vector2::new(p[0], p[1]), Vector2::new(p[2], p[3]), Vector2::new(p[4], p[5])),
             perspective: Vector2::new(p[6], p[7]),
         }
     }
@@ -199,7 +200,7 @@ mod tests {
 
     #[test]
     fn moved_applies_the_motion_to_every_template_point() {
-        let f = AffineFrame::new(Vector2::new(10.0, 20.0), Vector2::new(3.0, 1.0), Vector2::new(-1.0, 4.0));
+        let f = TemplateFrame::new(Vector2::new(10.0, 20.0), Vector2::new(3.0, 1.0), Vector2::new(-1.0, 4.0));
         let t = Vector2::new(1.5, -2.0);
         let a = Matrix2::new(0.1, -0.2, 0.05, 0.03);
         let c = Vector2::new(12.0, 18.0);
@@ -213,7 +214,7 @@ mod tests {
 
     #[test]
     fn projective_motion_composes_exactly_and_reduces_to_affine() {
-        let frame = AffineFrame::new(Vector2::new(200.0, 150.0), Vector2::new(40.0, 5.0), Vector2::new(-8.0, 30.0));
+        let frame = TemplateFrame::new(Vector2::new(200.0, 150.0), Vector2::new(40.0, 5.0), Vector2::new(-8.0, 30.0));
         let p = Placement { frame, perspective: Vector2::new(0.05, -0.08) };
         let (t, a, g, c) = (Vector2::new(2.0, -1.0), Matrix2::new(0.03, 0.01, -0.02, 0.04), Vector2::new(1e-3, 5e-4), Vector2::new(190.0, 160.0));
         let moved = p.moved(t, a, g, c).unwrap();
@@ -238,11 +239,11 @@ mod tests {
 
     #[test]
     fn anisotropy_of_similarity_is_one_and_of_collapsed_basis_infinite() {
-        let rot = AffineFrame::new(Vector2::zeros(), Vector2::new(3.0, 4.0), Vector2::new(-4.0, 3.0));
+        let rot = TemplateFrame::new(Vector2::zeros(), Vector2::new(3.0, 4.0), Vector2::new(-4.0, 3.0));
         assert!((rot.anisotropy() - 1.0).abs() < 1e-9);
-        let stretched = AffineFrame::new(Vector2::zeros(), Vector2::new(10.0, 0.0), Vector2::new(0.0, 2.0));
+        let stretched = TemplateFrame::new(Vector2::zeros(), Vector2::new(10.0, 0.0), Vector2::new(0.0, 2.0));
         assert!((stretched.anisotropy() - 5.0).abs() < 1e-9);
-        let flat = AffineFrame::new(Vector2::zeros(), Vector2::new(1.0, 1.0), Vector2::new(2.0, 2.0));
+        let flat = TemplateFrame::new(Vector2::zeros(), Vector2::new(1.0, 1.0), Vector2::new(2.0, 2.0));
         assert!(flat.anisotropy().is_infinite());
         assert!(flat.template_from_image(Vector2::new(1.0, 0.0)).is_none());
     }

@@ -2,7 +2,7 @@
 //! robust and fast.
 //!
 //! A polygon (a facet outline, the gripper's tracked face) is held as ~100 sampling points in
-//! template coordinates `(s, t)` of a frame `o, e1, e2` ([`AffineFrame`]), optionally with a
+//! template coordinates `(s, t)` of a frame `o, e1, e2` ([`TemplateFrame`]), optionally with a
 //! perspective term ([`Placement`]). Each update:
 //! 1. **Predict** the placement with a first-order filter scaled by the real time between
 //!    frames.
@@ -71,11 +71,11 @@ mod state;
 mod stereo;
 pub mod synth;
 
-pub use config::{ConfigError, EdgeSign, TrackerConfig};
+pub use config::{TrackerConfigError, EdgeSign, TrackerConfig};
 pub use contour::{Template, TemplateError, MIN_POINTS};
 pub use contour_tracker::{ContourTracker, SearchLine, TrackerError};
 pub use fit::{DeformationModel, RobustLoss};
-pub use frame::{AffineFrame, Placement};
+pub use frame::{TemplateFrame, Placement};
 pub use search::{Candidate, Polarity};
 pub use state::{Confidence, LostReason, TrackState};
 pub use stereo::{Role, StereoStates, StereoTrackerSet, View};

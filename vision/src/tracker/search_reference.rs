@@ -578,13 +578,8 @@ mod tests {
         // Random samples with runs and plateaus (ties are where an off-by-one would show),
         // every window start and length, all three polarity modes, several thresholds; the
         // reference is the definition in signed 16-bit arithmetic.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut rng = crate::rng::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.next_u64();
         let mut samples = [0u8; LINE_MAX + SLACK];
         let (mut scores, mut masks) = ([0u8; WINDOW_MAX], [0u16; WINDOW_MAX / 16]);
         let mut peaks_seen = 0;

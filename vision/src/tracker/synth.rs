@@ -2,42 +2,7 @@
 //! polygon on a shaded background, clutter lines, blur and noise. Deterministic for a seed.
 
 use crate::image::ImageBuf;
-
-/// A small deterministic random generator (SplitMix64): tests need reproducible noise, not
-/// cryptographic quality.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.uniform()
-    }
-
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u1 = self.uniform().max(1e-300);
-        let u2 = self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
-}
+use crate::rng::SplitMix64;
 
 /// A straight bar drawn over the scene: a segment `a`–`b` of `width_px`, adding `delta`
 /// grey levels (negative: darker).
@@ -95,7 +60,7 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 
 impl Scene {
     /// Renders the scene into `out` (resized to fit), drawing noise from `rng`.
-    pub fn render_into(&self, rng: &mut Rng, out: &mut ImageBuf) {
+    pub fn render_into(&self, rng: &mut SplitMix64, out: &mut ImageBuf) {
         out.width = self.width;
         out.height = self.height;
         out.data.resize(self.width * self.height, 0);
@@ -152,7 +117,7 @@ impl Scene {
     }
 
     /// Renders the scene into a new image.
-    pub fn render(&self, rng: &mut Rng) -> ImageBuf {
+    pub fn render(&self, rng: &mut SplitMix64) -> ImageBuf {
         let mut out = ImageBuf::new(self.width, self.height);
         self.render_into(rng, &mut out);
         out
@@ -177,7 +142,7 @@ mod tests {
             blur_px: 0.7,
             noise: 0.0,
         };
-        let img = scene.render(&mut Rng::new(1));
+        let img = scene.render(&mut SplitMix64::new(1));
         // The left side runs at x = 10.5: pixels 10 and 11 straddle it symmetrically.
         let (a, b) = (img.get(10, 20) as f64, img.get(11, 20) as f64);
         assert!(((a + b) / 2.0 - 150.0).abs() <= 1.0, "{a} {b}");

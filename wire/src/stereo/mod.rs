@@ -25,7 +25,7 @@ pub const MAX_PAYLOAD_BYTES: u64 = 256 * 1024 * 1024;
 /// The shape of the images a stereo publisher sends. Fixed for the publisher's lifetime: the
 /// shared-memory slots are sized for it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StereoGeometry {
+pub struct StereoFormat {
     pub width: u32,
     pub height: u32,
     /// Bytes from one row to the next, `>= width * bytes_per_pixel`.
@@ -34,7 +34,7 @@ pub struct StereoGeometry {
     pub pixel_format: PixelFormat,
 }
 
-impl StereoGeometry {
+impl StereoFormat {
     /// Two tightly packed GRAY8 images of `width` x `height` (stride = width).
     pub fn gray8_pair(width: u32, height: u32) -> Self {
         Self { width, height, stride: width, camera_count: 2, pixel_format: PixelFormat::Gray8 }
@@ -136,8 +136,8 @@ fn payload_len_of(h: &StereoHeader) -> Option<u64> {
 /// Frame-id order is checked by the subscriber, which knows the previous id.
 ///
 /// ```
-/// use handeye_wire::stereo::{validate_stereo, StereoGeometry, StereoReject};
-/// let mut h = StereoGeometry::gray8_pair(4, 3).header();
+/// use handeye_wire::stereo::{validate_stereo, StereoFormat, StereoReject};
+/// let mut h = StereoFormat::gray8_pair(4, 3).header();
 /// assert_eq!(validate_stereo(&h, 24).unwrap().plane_len, 12);
 /// assert!(matches!(validate_stereo(&h, 23), Err(StereoReject::PayloadLength { .. })));
 /// h.width = 0;
@@ -194,7 +194,7 @@ mod tests {
     use super::*;
 
     fn good() -> StereoHeader {
-        StereoGeometry::gray8_pair(640, 480).header()
+        StereoFormat::gray8_pair(640, 480).header()
     }
     const GOOD_LEN: usize = 640 * 480 * 2;
 

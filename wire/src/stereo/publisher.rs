@@ -12,8 +12,9 @@ use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use thiserror::Error;
 
-use super::{StereoGeometry, StereoLayout, StereoReject};
+use super::{StereoFormat, StereoLayout, StereoReject};
 use crate::domain::WireNode;
+use crate::liveness::{create_publisher, PublisherSlotError};
 use crate::services::{event_id, open_event_service, service_name, OpenError, STEREO_SIZING};
 use crate::types::{monotonic_ns, service, StereoHeader};
 
@@ -49,7 +50,7 @@ impl Default for StereoPublisherOptions {
 #[derive(Debug, Error)]
 pub enum StereoPublisherError {
     #[error("invalid stereo geometry {geometry:?}: {reason}")]
-    Geometry { geometry: StereoGeometry, reason: StereoReject },
+    Geometry { geometry: StereoFormat, reason: StereoReject },
     #[error(transparent)]
     Open(#[from] OpenError),
     #[error(
@@ -80,13 +81,13 @@ pub enum PublishError {
     Notify { detail: String },
 }
 
-/// Publishes frames of one [`StereoGeometry`] on `handeye/stereo`.
+/// Publishes frames of one [`StereoFormat`] on `handeye/stereo`.
 ///
 /// ```no_run
 /// use handeye_wire::{Domain, WireNode};
-/// use handeye_wire::stereo::{StereoGeometry, StereoPublisher, StereoPublisherOptions};
+/// use handeye_wire::stereo::{StereoFormat, StereoPublisher, StereoPublisherOptions};
 /// let node = WireNode::create(&Domain::new("handeye")?, "my-camera")?;
-/// let mut publisher = StereoPublisher::create(&node, StereoGeometry::gray8_pair(640, 480),
+/// let mut publisher = StereoPublisher::create(&node, StereoFormat::gray8_pair(640, 480),
 ///     StereoPublisherOptions::default())?;
 /// let capture_time_ns = handeye_wire::monotonic_ns();
 /// publisher.publish(capture_time_ns, |pixels| pixels.fill(128))?; // left rows, then right rows
@@ -100,7 +101,7 @@ pub struct StereoPublisher {
     service: PubSubFactory<ipc::Service, [u8], StereoHeader>,
     _events: EventFactory<ipc::Service>,
     node: WireNode,
-    geometry: StereoGeometry,
+    geometry: StereoFormat,
     layout: StereoLayout,
     max_payload: usize,
     delivery: Delivery,
@@ -110,7 +111,7 @@ pub struct StereoPublisher {
 impl StereoPublisher {
     /// Opens `handeye/stereo` in the node's domain and creates a publisher whose slots hold
     /// exactly one frame of `geometry`.
-    pub fn create(node: &WireNode, geometry: StereoGeometry, options: StereoPublisherOptions) -> Result<Self, StereoPublisherError> {
+    pub fn create(node: &WireNode, geometry: StereoFormat, options: StereoPublisherOptions) -> Result<Self, StereoPublisherError> {
         let layout = geometry.layout().map_err(|reason| StereoPublisherError::Geometry { geometry, reason })?;
         Self::create_with_slot(node, geometry, layout, layout.payload_len, options)
     }
@@ -120,7 +121,7 @@ impl StereoPublisher {
     /// still sends `geometry`.
     pub fn create_raw(
         node: &WireNode,
-        geometry: StereoGeometry,
+        geometry: StereoFormat,
         max_payload: usize,
         options: StereoPublisherOptions,
     ) -> Result<Self, StereoPublisherError> {
@@ -130,7 +131,7 @@ impl StereoPublisher {
 
     fn create_with_slot(
         node: &WireNode,
-        geometry: StereoGeometry,
+        geometry: StereoFormat,
         layout: StereoLayout,
         max_payload: usize,
         options: StereoPublisherOptions,
@@ -140,8 +141,7 @@ impl StereoPublisher {
         }
         let service = open_stereo_service(node)?;
         let events = open_event_service(node, service::STEREO, &STEREO_SIZING)?;
-        let start = Instant::now();
-        let publisher = loop {
+        let create = || {
             let mut builder = service
                 .publisher_builder()
                 .initial_max_slice_len(max_payload)
@@ -152,23 +152,16 @@ impl StereoPublisher {
                 // every subscriber has released the frame in it. `flush` loans them all at once.
                 builder = builder.max_loaned_samples(in_flight).override_sample_preallocation(move |_| in_flight);
             }
-            match builder.create() {
-                Ok(p) => break p,
-                Err(iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers) => {
-                    // Maybe a publisher that was just killed: clean it up and retry a little.
-                    service.try_cleanup_dead_nodes();
-                    if start.elapsed() >= options.create_timeout || !node.sleep(Duration::from_millis(50)) {
-                        return Err(StereoPublisherError::PublisherSlotTaken {
-                            service: service::STEREO,
-                            domain: node.domain().to_string(),
-                        });
-                    }
-                }
-                Err(e) => {
-                    return Err(StereoPublisherError::Port { port: "publisher", service: service::STEREO, detail: format!("{e:?}") });
-                }
-            }
+            builder.create()
         };
+        let publisher = create_publisher(node, &service, options.create_timeout, create).map_err(|e| match e {
+            PublisherSlotError::Taken => {
+                StereoPublisherError::PublisherSlotTaken { service: service::STEREO, domain: node.domain().to_string() }
+            }
+            PublisherSlotError::Create(e) => {
+                StereoPublisherError::Port { port: "publisher", service: service::STEREO, detail: format!("{e:?}") }
+            }
+        })?;
         let notifier = events
             .notifier_builder()
             .default_event_id(EventId::new(event_id::SAMPLE))
@@ -188,7 +181,7 @@ impl StereoPublisher {
         })
     }
 
-    pub fn geometry(&self) -> &StereoGeometry {
+    pub fn geometry(&self) -> &StereoFormat {
         &self.geometry
     }
 

@@ -12,7 +12,7 @@ use thiserror::Error;
 use super::publisher::open_stereo_service;
 use super::{validate_stereo, StereoLayout, StereoReject};
 use crate::domain::WireNode;
-use crate::liveness::{Liveness, LivenessChange, RateLimitedLog};
+use crate::liveness::{wait_on, ListeningPort, Liveness, LivenessChange, RateLimitedLog, Waited};
 use crate::services::{open_event_service, OpenError, STEREO_SIZING};
 use crate::types::{monotonic_ns, service, StereoHeader};
 
@@ -275,34 +275,41 @@ impl StereoSubscriber {
     /// come first; liveness is re-checked at least every [`crate::LIVENESS_PERIOD`], so a
     /// killed publisher is reported within about that period.
     pub fn wait(&mut self, timeout: Duration) -> Result<StereoEvent, StereoWaitError> {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(frame) = self.try_receive() {
-                return Ok(StereoEvent::Frame(frame));
+        let waited = wait_on(self, timeout).map_err(|detail| StereoWaitError::Listener { service: service::STEREO, detail })?;
+        Ok(match waited {
+            Waited::Received(frame) => StereoEvent::Frame(frame),
+            Waited::Publisher(LivenessChange::Up) => {
+                self.stats.publisher_up += 1;
+                StereoEvent::PublisherUp
             }
-            match self.liveness.check_if_due(&self.service) {
-                Some(LivenessChange::Up) => {
-                    self.stats.publisher_up += 1;
-                    return Ok(StereoEvent::PublisherUp);
-                }
-                Some(LivenessChange::Gone) => {
-                    self.stats.publisher_gone += 1;
-                    // The next publisher starts a new sequence.
-                    self.last = None;
-                    return Ok(StereoEvent::PublisherGone);
-                }
-                None => {}
+            Waited::Publisher(LivenessChange::Gone) => {
+                self.stats.publisher_gone += 1;
+                // The next publisher starts a new sequence.
+                self.last = None;
+                StereoEvent::PublisherGone
             }
-            if self.node.termination_requested() {
-                return Ok(StereoEvent::Interrupted);
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(StereoEvent::Timeout);
-            }
-            self.liveness
-                .nap(&self.listener, deadline)
-                .map_err(|detail| StereoWaitError::Listener { service: service::STEREO, detail })?;
-        }
+            Waited::Interrupted => StereoEvent::Interrupted,
+            Waited::Timeout => StereoEvent::Timeout,
+        })
+    }
+}
+
+impl ListeningPort for StereoSubscriber {
+    type Item = StereoFrame;
+
+    fn try_receive(&mut self) -> Option<StereoFrame> {
+        StereoSubscriber::try_receive(self)
+    }
+
+    fn check_liveness(&mut self) -> Option<LivenessChange> {
+        self.liveness.check_if_due(&self.service)
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.node.termination_requested()
+    }
+
+    fn nap(&mut self, deadline: Instant) -> Result<(), String> {
+        self.liveness.nap(&self.listener, deadline)
     }
 }
