@@ -637,7 +637,12 @@ impl DaemonConfig {
         if let Some(key) = unknown_key(&table, &Self::known_keys(), "") {
             return Err(parse_error(format!("unknown key {key}")));
         }
-        let cfg: Self = toml::from_str(text).map_err(|e| parse_error(e.to_string()))?;
+        let cfg: Self = toml::from_str(text).map_err(|e| match bad_value(&table) {
+            // A value of the wrong type in a flattened group is reported at its table, not
+            // its key: name the key.
+            Some((key, reason)) => parse_error(format!("{key}: {reason}")),
+            None => parse_error(e.to_string()),
+        })?;
         cfg.validate(file)?;
         Ok(cfg)
     }
@@ -804,6 +809,34 @@ fn unknown_key(table: &toml::Table, known: &toml::Table, prefix: &str) -> Option
     })
 }
 
+/// The first key of a file's table whose value cannot be read (wrong type, out of its type's
+/// range), with serde's reason: each key is read alone (every other key has a default).
+fn bad_value(table: &toml::Table) -> Option<(String, String)> {
+    fn leaves<'a>(table: &'a toml::Table, prefix: &[&'a str], out: &mut Vec<(Vec<&'a str>, &'a toml::Value)>) {
+        for (key, value) in table {
+            let mut path = prefix.to_vec();
+            path.push(key);
+            match value {
+                toml::Value::Table(inner) => leaves(inner, &path, out),
+                _ => out.push((path, value)),
+            }
+        }
+    }
+    let mut all = Vec::new();
+    leaves(table, &[], &mut all);
+    all.into_iter().find_map(|(path, value)| {
+        let (last, tables) = path.split_last()?;
+        let mut alone = toml::Table::new();
+        alone.insert((*last).to_string(), value.clone());
+        for key in tables.iter().rev() {
+            let mut outer = toml::Table::new();
+            outer.insert((*key).to_string(), toml::Value::Table(alone));
+            alone = outer;
+        }
+        toml::Value::Table(alone).try_into::<DaemonConfig>().err().map(|e| (path.join("."), e.message().trim().to_string()))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -967,6 +1000,17 @@ mod tests {
         ] {
             let err = DaemonConfig::parse(text, Path::new("my.toml")).unwrap_err().to_string();
             assert!(err.contains("my.toml") && err.contains(&format!("unknown key {key}")), "{text:?}: {err}");
+        }
+        // A value of the wrong type is named by its key, in a flattened group too.
+        for (text, key) in [
+            ("[servo]\nsettle_frames = 2\ngain = \"x\"\n", "servo.gain"),
+            ("[plan]\njoin_m = true\n", "plan.join_m"),
+            ("deadline_us = 10\nframe_rate_hz = \"fast\"\n[servo]\ngain = 0.4\n", "frame_rate_hz"),
+            ("[gripper]\nmax_opening_m = \"x\"\n", "gripper.max_opening_m"),
+            ("[servo]\nmax_steps = -1\n", "servo.max_steps"),
+        ] {
+            let err = DaemonConfig::parse(text, Path::new("my.toml")).unwrap_err().to_string();
+            assert!(err.contains("my.toml") && err.contains(&format!("{key}: ")), "{text:?}: {err}");
         }
         // A key that is a table's name used as a value is a type error, not an unknown key.
         assert!(DaemonConfig::parse("servo = 1\n", Path::new("my.toml")).is_err());
