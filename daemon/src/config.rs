@@ -32,7 +32,7 @@ pub enum ConfigError {
 
 /// `daemon.toml`. The top-level keys are [`RunTiming`]'s (flattened: the file has no
 /// `[timing]` table); every other group is a table of its own.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DaemonConfig {
     #[serde(flatten)]
@@ -46,23 +46,6 @@ pub struct DaemonConfig {
     pub grasp: GraspConfig,
     pub safety: SafetyConfig,
     pub tracker: TrackerSettings,
-}
-
-impl Default for DaemonConfig {
-    fn default() -> Self {
-        Self {
-            timing: RunTiming::default(),
-            gripper: GripperModel::default(),
-            calibration: CalibrationConfig::default(),
-            acquire: AcquireConfig::default(),
-            target: TargetConfig::default(),
-            plan: PlanSettings::default(),
-            servo: ServoSettings::default(),
-            grasp: GraspConfig::default(),
-            safety: SafetyConfig::default(),
-            tracker: TrackerSettings::default(),
-        }
-    }
 }
 
 /// The run's loop timing and wall-clock limits (the top-level keys of `daemon.toml`).
