@@ -10,7 +10,7 @@
 //! ```
 //! use handeye_daemon::config::DaemonConfig;
 //! let cfg = DaemonConfig::parse("[servo]\ngain = 0.4\n", "daemon.toml".as_ref()).unwrap();
-//! assert_eq!(cfg.servo.gain, 0.4);
+//! assert_eq!(cfg.servo.control.gain, 0.4);
 //! let err = DaemonConfig::parse("[servo]\ngian = 0.4\n", "daemon.toml".as_ref()).unwrap_err();
 //! assert!(err.to_string().contains("gian"), "{err}");
 //! ```
@@ -30,21 +30,13 @@ pub enum ConfigError {
     Invalid { file: PathBuf, field: &'static str, value: String, expected: &'static str },
 }
 
-/// `daemon.toml`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+/// `daemon.toml`. The top-level keys are [`RunTiming`]'s (flattened: the file has no
+/// `[timing]` table); every other group is a table of its own.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DaemonConfig {
-    /// Nominal camera frame rate: time-outs and tracker time steps count frames at this rate.
-    pub frame_rate_hz: f64,
-    /// A cycle (frame received → command sent) longer than this is a deadline miss, µs.
-    pub deadline_us: u64,
-    /// Stop the arm when no frame arrives for this long (wall clock), ms.
-    pub stale_frame_ms: u64,
-    /// Longest wait for the first frame at start-up, s (wall clock).
-    pub start_timeout_s: f64,
-    /// After `done`, keep answering frames (holding) for this long before exiting, s of frames;
-    /// the run also ends when the camera stream goes away.
-    pub done_hold_s: f64,
+    #[serde(flatten)]
+    pub timing: RunTiming,
     pub gripper: GripperModel,
     pub calibration: CalibrationConfig,
     pub acquire: AcquireConfig,
@@ -56,24 +48,26 @@ pub struct DaemonConfig {
     pub tracker: TrackerSettings,
 }
 
-impl Default for DaemonConfig {
+/// The run's loop timing and wall-clock limits (the top-level keys of `daemon.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RunTiming {
+    /// Nominal camera frame rate: time-outs and tracker time steps count frames at this rate.
+    pub frame_rate_hz: f64,
+    /// A cycle (frame received → command sent) longer than this is a deadline miss, µs.
+    pub deadline_us: u64,
+    /// Stop the arm when no frame arrives for this long (wall clock), ms.
+    pub stale_frame_ms: u64,
+    /// Longest wait for the first frame at start-up, s (wall clock).
+    pub start_timeout_s: f64,
+    /// After `done`, keep answering frames (holding) for this long before exiting, s of frames;
+    /// the run also ends when the camera stream goes away.
+    pub done_hold_s: f64,
+}
+
+impl Default for RunTiming {
     fn default() -> Self {
-        Self {
-            frame_rate_hz: 30.0,
-            deadline_us: 1000,
-            stale_frame_ms: 100,
-            start_timeout_s: 60.0,
-            done_hold_s: 4.0,
-            gripper: GripperModel::default(),
-            calibration: CalibrationConfig::default(),
-            acquire: AcquireConfig::default(),
-            target: TargetConfig::default(),
-            plan: PlanSettings::default(),
-            servo: ServoSettings::default(),
-            grasp: GraspConfig::default(),
-            safety: SafetyConfig::default(),
-            tracker: TrackerSettings::default(),
-        }
+        Self { frame_rate_hz: 30.0, deadline_us: 1000, stale_frame_ms: 100, start_timeout_s: 60.0, done_hold_s: 4.0 }
     }
 }
 
@@ -215,9 +209,10 @@ impl Default for TargetConfig {
     }
 }
 
-/// The plan phase: one stereo pair to the planner, the grasp chosen (thesis ch. 5-6).
+/// The plan phase: one stereo pair to the planner, the grasp chosen (thesis ch. 5-6). The
+/// groups are flattened: all their keys are in the `[plan]` table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct PlanSettings {
     /// Where the tool waits while the planner looks, robot frame, m: clear of the blocks, the
     /// gripper still in view (its trackers keep running). Empty = where the calibration
@@ -225,12 +220,54 @@ pub struct PlanSettings {
     pub park_m: Vec<f64>,
     /// Frames the arm must be still before the stereo pair is taken.
     pub settle_frames: u32,
+    #[serde(flatten)]
+    pub stereo: PlanStereo,
+    #[serde(flatten)]
+    pub mask: PlanMask,
+    #[serde(flatten)]
+    pub scene: PlanScene,
+    #[serde(flatten)]
+    pub grasp: PlanGraspRules,
+    /// Time-out of the phase (park, settle, plan), s.
+    pub timeout_s: f64,
+}
+
+impl Default for PlanSettings {
+    fn default() -> Self {
+        Self {
+            park_m: Vec::new(),
+            settle_frames: 5,
+            stereo: PlanStereo::default(),
+            mask: PlanMask::default(),
+            scene: PlanScene::default(),
+            grasp: PlanGraspRules::default(),
+            timeout_s: 20.0,
+        }
+    }
+}
+
+/// The planner's stereo matching: the epipolar tolerance and the disparity range.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PlanStereo {
     /// Tolerance of the weak epipolar constraint for stereo matches, px.
     pub epipolar_tol_px: f64,
     /// The cage's disparity range is widened by this fraction of it on each side, plus
     /// `disparity_margin_px` (the blocks lie below the cage).
     pub disparity_margin: f64,
     pub disparity_margin_px: f64,
+}
+
+impl Default for PlanStereo {
+    fn default() -> Self {
+        Self { epipolar_tol_px: 3.0, disparity_margin: 0.5, disparity_margin_px: 10.0 }
+    }
+}
+
+/// The gripper's region masked out of the images before planning.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PlanMask {
     /// The region of the images masked out before planning: this box around the gripper's
     /// reference point (plate centre), in plate axes `a` (along the plate, horizontal), `b`
     /// (up) and `n` (the plate normal, the jaws' closing axis), each `[min, max]`, m,
@@ -238,9 +275,48 @@ pub struct PlanSettings {
     /// plate, the palm and the open fingers of the simulator's gripper.
     pub mask_box_m: [[f64; 2]; 3],
     pub mask_margin_px: f64,
+}
+
+impl Default for PlanMask {
+    fn default() -> Self {
+        Self { mask_box_m: [[-0.035, 0.035], [-0.11, 0.04], [-0.125, 0.012]], mask_margin_px: 6.0 }
+    }
+}
+
+/// How the planner's features become the grasp scene: what is the arm, what is one object,
+/// which missed faces and edges are looked for.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PlanScene {
     /// Features whose lowest point is higher than the parked tool point less this are the arm
     /// (it moves away before the grasp), not obstacles, m.
     pub arm_clearance_m: f64,
+    /// Hypothesise the vertical faces the planner missed below the front edges of top faces,
+    /// down to the table (`grasp.table_z_m`): blocks rest on the table, and a face towards
+    /// the cameras under a seen top edge is seen too; the target trackers check it.
+    pub hypothesise_front_faces: bool,
+    /// When no grasp site is near the indicated point (or only zero-width ones), look in the
+    /// images for the rear edge of the top face behind each vertical face there (a line at
+    /// the face's top-edge height, 8-55 mm behind it, that both views show as a step), and
+    /// plan again: the planner's top faces seen at a grazing angle come out tilted or are
+    /// missed.
+    pub rear_edges_from_image: bool,
+    /// Reconstructed features closer than this in 3-D belong to one object (the thesis's
+    /// "3-D connected component"; the planner's own components need a junction seen in both
+    /// views), m.
+    pub join_m: f64,
+}
+
+impl Default for PlanScene {
+    fn default() -> Self {
+        Self { arm_clearance_m: 0.02, hypothesise_front_faces: true, rear_edges_from_image: true, join_m: 0.004 }
+    }
+}
+
+/// The grasp planner's gripper model and the rules a candidate grasp site must pass.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PlanGraspRules {
     /// Finger cross-section of the grasp planner's gripper model: along the closing axis and
     /// along the edge, m.
     pub finger_thickness_m: f64,
@@ -256,72 +332,64 @@ pub struct PlanSettings {
     /// plate, normal to the jaws' closing axis, ends up as oblique as the facet (an L-block
     /// face at 55° was servoed to 0.7 mm and 2.2°), degrees.
     pub max_view_angle_deg: f64,
-    /// Hypothesise the vertical faces the planner missed below the front edges of top faces,
-    /// down to the table (`grasp.table_z_m`): blocks rest on the table, and a face towards
-    /// the cameras under a seen top edge is seen too; the target trackers check it.
-    pub hypothesise_front_faces: bool,
-    /// When no grasp site is near the indicated point (or only zero-width ones), look in the
-    /// images for the rear edge of the top face behind each vertical face there (a line at
-    /// the face's top-edge height, 8-55 mm behind it, that both views show as a step), and
-    /// plan again: the planner's top faces seen at a grazing angle come out tilted or are
-    /// missed.
-    pub rear_edges_from_image: bool,
-    /// Reconstructed features closer than this in 3-D belong to one object (the thesis's
-    /// "3-D connected component"; the planner's own components need a junction seen in both
-    /// views), m.
-    pub join_m: f64,
     /// The grasp nearest the indicated point must be this close to it (plan view, grasp
     /// centre), or the block the operator meant has no grasp site and the plan fails (rather
     /// than grasp another block), m.
     pub max_site_distance_m: f64,
-    /// Time-out of the phase (park, settle, plan), s.
-    pub timeout_s: f64,
 }
 
-impl Default for PlanSettings {
+impl Default for PlanGraspRules {
     fn default() -> Self {
         Self {
-            park_m: Vec::new(),
-            settle_frames: 5,
-            epipolar_tol_px: 3.0,
-            disparity_margin: 0.5,
-            disparity_margin_px: 10.0,
-            mask_box_m: [[-0.035, 0.035], [-0.11, 0.04], [-0.125, 0.012]],
-            mask_margin_px: 6.0,
-            arm_clearance_m: 0.02,
             finger_thickness_m: 0.012,
             finger_breadth_m: 0.020,
             parallel_tolerance_deg: 15.0,
             object_tolerance_m: 0.008,
             max_view_angle_deg: 60.0,
-            hypothesise_front_faces: true,
-            rear_edges_from_image: true,
-            join_m: 0.004,
             max_site_distance_m: 0.06,
-            timeout_s: 20.0,
         }
     }
 }
 
-/// The coplanarity servo (see `handeye_vision::servo`).
+/// The coplanarity servo (see `handeye_vision::servo`). The groups are flattened: all their
+/// keys are in the `[servo]` table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct ServoSettings {
+    #[serde(flatten)]
+    pub control: ServoControl,
+    #[serde(flatten)]
+    pub limits: ServoLimits,
+    #[serde(flatten)]
+    pub convergence: ServoConvergence,
+    /// Frames to wait after the arm arrives before measuring again.
+    pub settle_frames: u32,
+    /// Tool speed of servo moves, m/s.
+    pub speed_mps: f64,
+    #[serde(flatten)]
+    pub approach: ServoApproach,
+}
+
+impl Default for ServoSettings {
+    fn default() -> Self {
+        Self {
+            control: ServoControl::default(),
+            limits: ServoLimits::default(),
+            convergence: ServoConvergence::default(),
+            settle_frames: 2,
+            speed_mps: 0.08,
+            approach: ServoApproach::default(),
+        }
+    }
+}
+
+/// The servo's control law: gain, Jacobian update and the weighting of its error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ServoControl {
     pub gain: f64,
-    pub max_step_m: f64,
-    pub max_yaw_step_deg: f64,
-    pub converged_m: f64,
-    pub converged_deg: f64,
-    pub converged_steps: u32,
-    pub max_steps: u32,
     /// Refine the Jacobian online (Broyden).
     pub broyden: bool,
-    /// A gripper mark's parallax may leave the epipolar direction by this much, px (plus
-    /// `max_across_ratio` of its length) before the servo calls a tracker wrong. The facet's
-    /// plane transfer is extrapolated a few facet heights up to the plate, and under real
-    /// perspective that leaves a systematic ~10 px across the epipolar lines.
-    pub max_across_px: f64,
-    pub max_across_ratio: f64,
     /// Length that turns yaw into a distance for the servo's step metric, m: about the
     /// distance of the marks from the reference point.
     pub yaw_lever_m: f64,
@@ -330,10 +398,57 @@ pub struct ServoSettings {
     /// Weight of the in-plane angle error ρ against the marks' parallaxes (see
     /// `ServoConfig::angle_weight`); 0 = yaw from the parallaxes alone.
     pub angle_weight: f64,
-    /// Frames to wait after the arm arrives before measuring again.
-    pub settle_frames: u32,
-    /// Tool speed of servo moves, m/s.
-    pub speed_mps: f64,
+}
+
+impl Default for ServoControl {
+    fn default() -> Self {
+        Self { gain: 0.5, broyden: false, yaw_lever_m: 0.025, min_condition: 0.02, angle_weight: 1.0 }
+    }
+}
+
+/// The servo's limits: the largest step, and how far a mark's parallax may leave the
+/// epipolar direction before a tracker counts as wrong.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ServoLimits {
+    pub max_step_m: f64,
+    pub max_yaw_step_deg: f64,
+    /// A gripper mark's parallax may leave the epipolar direction by this much, px (plus
+    /// `max_across_ratio` of its length) before the servo calls a tracker wrong. The facet's
+    /// plane transfer is extrapolated a few facet heights up to the plate, and under real
+    /// perspective that leaves a systematic ~10 px across the epipolar lines.
+    pub max_across_px: f64,
+    pub max_across_ratio: f64,
+}
+
+impl Default for ServoLimits {
+    fn default() -> Self {
+        Self { max_step_m: 0.03, max_yaw_step_deg: 8.0, max_across_px: 25.0, max_across_ratio: 0.3 }
+    }
+}
+
+/// When the servo has converged, and when it gives up.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ServoConvergence {
+    pub converged_m: f64,
+    pub converged_deg: f64,
+    pub converged_steps: u32,
+    pub max_steps: u32,
+    pub timeout_s: f64,
+}
+
+impl Default for ServoConvergence {
+    fn default() -> Self {
+        Self { converged_m: 0.0005, converged_deg: 0.3, converged_steps: 3, max_steps: 60, timeout_s: 90.0 }
+    }
+}
+
+/// Where the servo works relative to the grasp: the local cage, the standoff and the grasp
+/// height.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ServoApproach {
     /// Height of the tool point above the table (`grasp.table_z_m`) at the grasp, m.
     pub grasp_height_m: f64,
     /// Size of the local cage visited around the coarse approach pose, m: 7 points, the
@@ -345,32 +460,11 @@ pub struct ServoSettings {
     /// The servo's goal is this far above the grasp pose (the open-loop approach comes down
     /// by it), m.
     pub standoff_above_m: f64,
-    pub timeout_s: f64,
 }
 
-impl Default for ServoSettings {
+impl Default for ServoApproach {
     fn default() -> Self {
-        Self {
-            gain: 0.5,
-            max_step_m: 0.03,
-            max_yaw_step_deg: 8.0,
-            converged_m: 0.0005,
-            converged_deg: 0.3,
-            converged_steps: 3,
-            max_steps: 60,
-            broyden: false,
-            max_across_px: 25.0,
-            max_across_ratio: 0.3,
-            yaw_lever_m: 0.025,
-            min_condition: 0.02,
-            angle_weight: 1.0,
-            settle_frames: 2,
-            speed_mps: 0.08,
-            grasp_height_m: 0.010,
-            local_cage_m: 0.03,
-            standoff_above_m: 0.06,
-            timeout_s: 90.0,
-        }
+        Self { grasp_height_m: 0.010, local_cage_m: 0.03, standoff_above_m: 0.06 }
     }
 }
 
@@ -521,9 +615,26 @@ impl DaemonConfig {
 
     /// Parses and checks TOML text; `file` names it in errors.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
-        let cfg: Self = toml::from_str(text).map_err(|e| ConfigError::Parse { file: file.to_path_buf(), message: e.to_string() })?;
+        let parse_error = |message: String| ConfigError::Parse { file: file.to_path_buf(), message };
+        let table: toml::Table = toml::from_str(text).map_err(|e| parse_error(e.to_string()))?;
+        if let Some(key) = unknown_key(&table, &Self::known_keys(), "") {
+            return Err(parse_error(format!("unknown key {key}")));
+        }
+        let cfg: Self = toml::from_str(text).map_err(|e| match bad_value(&table) {
+            // A value of the wrong type in a flattened group is reported at its table, not
+            // its key: name the key.
+            Some((key, reason)) => parse_error(format!("{key}: {reason}")),
+            None => parse_error(e.to_string()),
+        })?;
         cfg.validate(file)?;
         Ok(cfg)
+    }
+
+    /// Every key a file may set, as the default configuration's TOML table: every key has a
+    /// default and every default serialises (the `Vec` fields as arrays, possibly empty; no
+    /// field is an `Option`), so the table holds each known key at its place.
+    fn known_keys() -> toml::Table {
+        toml::Table::try_from(Self::default()).expect("the default configuration serialises to a TOML table")
     }
 
     /// The configuration as TOML (what `handeye run` writes for the daemon).
@@ -537,14 +648,14 @@ impl DaemonConfig {
             Err(ConfigError::Invalid { file: file.to_path_buf(), field, value, expected })
         };
         let pos = |x: f64| x.is_finite() && x > 0.0;
-        if !pos(self.frame_rate_hz) {
-            return bad("frame_rate_hz", self.frame_rate_hz.to_string(), "> 0");
+        if !pos(self.timing.frame_rate_hz) {
+            return bad("frame_rate_hz", self.timing.frame_rate_hz.to_string(), "> 0");
         }
-        if self.stale_frame_ms == 0 {
+        if self.timing.stale_frame_ms == 0 {
             return bad("stale_frame_ms", "0".into(), ">= 1");
         }
         for (field, v) in [
-            ("start_timeout_s", self.start_timeout_s),
+            ("start_timeout_s", self.timing.start_timeout_s),
             ("calibration.speed_mps", self.calibration.speed_mps),
             ("calibration.max_residual_px", self.calibration.max_residual_px),
             ("calibration.max_epipolar_px", self.calibration.max_epipolar_px),
@@ -552,16 +663,16 @@ impl DaemonConfig {
             ("acquire.timeout_s", self.acquire.timeout_s),
             ("target.timeout_s", self.target.timeout_s),
             ("plan.timeout_s", self.plan.timeout_s),
-            ("plan.epipolar_tol_px", self.plan.epipolar_tol_px),
-            ("plan.finger_thickness_m", self.plan.finger_thickness_m),
-            ("plan.finger_breadth_m", self.plan.finger_breadth_m),
+            ("plan.epipolar_tol_px", self.plan.stereo.epipolar_tol_px),
+            ("plan.finger_thickness_m", self.plan.grasp.finger_thickness_m),
+            ("plan.finger_breadth_m", self.plan.grasp.finger_breadth_m),
             ("gripper.max_grasp_width_m", self.gripper.max_grasp_width_m),
-            ("plan.max_view_angle_deg", self.plan.max_view_angle_deg),
-            ("plan.parallel_tolerance_deg", self.plan.parallel_tolerance_deg),
-            ("plan.max_site_distance_m", self.plan.max_site_distance_m),
-            ("servo.max_step_m", self.servo.max_step_m),
+            ("plan.max_view_angle_deg", self.plan.grasp.max_view_angle_deg),
+            ("plan.parallel_tolerance_deg", self.plan.grasp.parallel_tolerance_deg),
+            ("plan.max_site_distance_m", self.plan.grasp.max_site_distance_m),
+            ("servo.max_step_m", self.servo.limits.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),
-            ("servo.timeout_s", self.servo.timeout_s),
+            ("servo.timeout_s", self.servo.convergence.timeout_s),
             ("grasp.approach_speed_mps", self.grasp.approach_speed_mps),
             ("grasp.lift_speed_mps", self.grasp.lift_speed_mps),
             ("grasp.timeout_s", self.grasp.timeout_s),
@@ -572,11 +683,11 @@ impl DaemonConfig {
                 return bad(field, v.to_string(), "a finite number > 0");
             }
         }
-        if !(self.done_hold_s.is_finite() && self.done_hold_s >= 0.0) {
-            return bad("done_hold_s", self.done_hold_s.to_string(), ">= 0");
+        if !(self.timing.done_hold_s.is_finite() && self.timing.done_hold_s >= 0.0) {
+            return bad("done_hold_s", self.timing.done_hold_s.to_string(), ">= 0");
         }
-        if !(self.servo.gain > 0.0 && self.servo.gain < 1.0) {
-            return bad("servo.gain", self.servo.gain.to_string(), "0 < gain < 1");
+        if !(self.servo.control.gain > 0.0 && self.servo.control.gain < 1.0) {
+            return bad("servo.gain", self.servo.control.gain.to_string(), "0 < gain < 1");
         }
         if self.calibration.cage_m.len() < 4 {
             return bad("calibration.cage_m", format!("{} points", self.calibration.cage_m.len()), "at least 4 non-coplanar points");
@@ -590,16 +701,16 @@ impl DaemonConfig {
         if !(self.plan.park_m.is_empty() || self.plan.park_m.len() == 3) {
             return bad("plan.park_m", format!("{:?}", self.plan.park_m), "empty or [x, y, z]");
         }
-        if self.plan.mask_box_m.iter().flatten().any(|v| !v.is_finite()) || self.plan.mask_box_m.iter().any(|r| r[0] > r[1]) {
-            return bad("plan.mask_box_m", format!("{:?}", self.plan.mask_box_m), "three finite [min, max] ranges");
+        if self.plan.mask.mask_box_m.iter().flatten().any(|v| !v.is_finite()) || self.plan.mask.mask_box_m.iter().any(|r| r[0] > r[1]) {
+            return bad("plan.mask_box_m", format!("{:?}", self.plan.mask.mask_box_m), "three finite [min, max] ranges");
         }
         for (field, v) in [
-            ("plan.disparity_margin", self.plan.disparity_margin),
-            ("plan.disparity_margin_px", self.plan.disparity_margin_px),
-            ("plan.mask_margin_px", self.plan.mask_margin_px),
-            ("plan.arm_clearance_m", self.plan.arm_clearance_m),
-            ("plan.object_tolerance_m", self.plan.object_tolerance_m),
-            ("plan.join_m", self.plan.join_m),
+            ("plan.disparity_margin", self.plan.stereo.disparity_margin),
+            ("plan.disparity_margin_px", self.plan.stereo.disparity_margin_px),
+            ("plan.mask_margin_px", self.plan.mask.mask_margin_px),
+            ("plan.arm_clearance_m", self.plan.scene.arm_clearance_m),
+            ("plan.object_tolerance_m", self.plan.grasp.object_tolerance_m),
+            ("plan.join_m", self.plan.scene.join_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, v.to_string(), "a finite number >= 0");
@@ -625,20 +736,20 @@ impl DaemonConfig {
         if g.max_grasp_width_m > g.max_opening_m {
             return bad("gripper.max_grasp_width_m", g.max_grasp_width_m.to_string(), "at most gripper.max_opening_m (the jaws must open past the block)");
         }
-        if !(1..=16).contains(&self.servo.converged_steps) {
-            return bad("servo.converged_steps", self.servo.converged_steps.to_string(), "1..=16");
+        if !(1..=16).contains(&self.servo.convergence.converged_steps) {
+            return bad("servo.converged_steps", self.servo.convergence.converged_steps.to_string(), "1..=16");
         }
-        if self.servo.max_steps == 0 {
+        if self.servo.convergence.max_steps == 0 {
             return bad("servo.max_steps", "0".into(), ">= 1");
         }
-        if !(self.servo.angle_weight.is_finite() && self.servo.angle_weight >= 0.0) {
-            return bad("servo.angle_weight", self.servo.angle_weight.to_string(), ">= 0");
+        if !(self.servo.control.angle_weight.is_finite() && self.servo.control.angle_weight >= 0.0) {
+            return bad("servo.angle_weight", self.servo.control.angle_weight.to_string(), ">= 0");
         }
-        if !(self.servo.local_cage_m.is_finite() && self.servo.local_cage_m >= 0.0) {
-            return bad("servo.local_cage_m", self.servo.local_cage_m.to_string(), ">= 0 (0 = no local cage)");
+        if !(self.servo.approach.local_cage_m.is_finite() && self.servo.approach.local_cage_m >= 0.0) {
+            return bad("servo.local_cage_m", self.servo.approach.local_cage_m.to_string(), ">= 0 (0 = no local cage)");
         }
-        if !(self.servo.standoff_above_m.is_finite() && self.servo.standoff_above_m >= 0.0) {
-            return bad("servo.standoff_above_m", self.servo.standoff_above_m.to_string(), ">= 0");
+        if !(self.servo.approach.standoff_above_m.is_finite() && self.servo.approach.standoff_above_m >= 0.0) {
+            return bad("servo.standoff_above_m", self.servo.approach.standoff_above_m.to_string(), ">= 0");
         }
         if let Err(e) = self.tracker.tracker_config().validate().and_then(|_| self.tracker.target_tracker_config().validate()) {
             // The daemon's names for the settings it exposes.
@@ -662,8 +773,51 @@ impl DaemonConfig {
 
     /// Seconds → frames at the nominal rate (at least 1).
     pub fn frames(&self, seconds: f64) -> u64 {
-        (seconds * self.frame_rate_hz).ceil().max(1.0) as u64
+        (seconds * self.timing.frame_rate_hz).ceil().max(1.0) as u64
     }
+}
+
+/// The first key of `table` (a file's) that `known` lacks, as a dotted path (`servo.gian`).
+/// The groups are flattened into their tables, so serde's `deny_unknown_fields` cannot be
+/// used; this check takes its place before the file is deserialised. Tables are compared
+/// key by key; a value that is no table in `known` is a leaf (its type is serde's to check).
+fn unknown_key(table: &toml::Table, known: &toml::Table, prefix: &str) -> Option<String> {
+    table.iter().find_map(|(key, value)| {
+        let path = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
+        match (value, known.get(key)) {
+            (_, None) => Some(path),
+            (toml::Value::Table(inner), Some(toml::Value::Table(known_inner))) => unknown_key(inner, known_inner, &path),
+            _ => None,
+        }
+    })
+}
+
+/// The first key of a file's table whose value cannot be read (wrong type, out of its type's
+/// range), with serde's reason: each key is read alone (every other key has a default).
+fn bad_value(table: &toml::Table) -> Option<(String, String)> {
+    fn leaves<'a>(table: &'a toml::Table, prefix: &[&'a str], out: &mut Vec<(Vec<&'a str>, &'a toml::Value)>) {
+        for (key, value) in table {
+            let mut path = prefix.to_vec();
+            path.push(key);
+            match value {
+                toml::Value::Table(inner) => leaves(inner, &path, out),
+                _ => out.push((path, value)),
+            }
+        }
+    }
+    let mut all = Vec::new();
+    leaves(table, &[], &mut all);
+    all.into_iter().find_map(|(path, value)| {
+        let (last, tables) = path.split_last()?;
+        let mut alone = toml::Table::new();
+        alone.insert((*last).to_string(), value.clone());
+        for key in tables.iter().rev() {
+            let mut outer = toml::Table::new();
+            outer.insert((*key).to_string(), toml::Value::Table(alone));
+            alone = outer;
+        }
+        toml::Value::Table(alone).try_into::<DaemonConfig>().err().map(|e| (path.join("."), e.message().trim().to_string()))
+    })
 }
 
 #[cfg(test)]
@@ -676,6 +830,173 @@ mod tests {
         cfg.validate(Path::new("x")).unwrap();
         let back = DaemonConfig::parse(&cfg.to_toml(), Path::new("x")).unwrap();
         assert_eq!(back, cfg);
+    }
+
+    /// The dotted paths of every key in a TOML text, sorted.
+    fn key_paths(text: &str) -> Vec<String> {
+        fn walk(table: &toml::Table, prefix: &str, out: &mut Vec<String>) {
+            for (key, value) in table {
+                let path = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
+                match value {
+                    toml::Value::Table(inner) => walk(inner, &path, out),
+                    _ => out.push(path),
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&toml::from_str(text).unwrap(), "", &mut out);
+        out.sort();
+        out
+    }
+
+    #[test]
+    fn the_written_file_keeps_its_keys_and_tables() {
+        // `DaemonConfig::default().to_toml()`'s keys before the groups were flattened into
+        // their tables: a user's file, and `handeye run`'s, must keep meaning the same.
+        let mut before = vec![
+            "frame_rate_hz",
+            "deadline_us",
+            "stale_frame_ms",
+            "start_timeout_s",
+            "done_hold_s",
+            "gripper.plate_corners_m",
+            "gripper.marks_m",
+            "gripper.reference_m",
+            "gripper.tool_from_reference_m",
+            "gripper.max_opening_m",
+            "gripper.max_grasp_width_m",
+            "gripper.normal_at_zero_yaw",
+            "gripper.plate_bright_inside",
+            "calibration.cage_m",
+            "calibration.speed_mps",
+            "calibration.settle_frames",
+            "calibration.samples",
+            "calibration.max_residual_px",
+            "calibration.max_epipolar_px",
+            "calibration.point_timeout_s",
+            "calibration.park_m",
+            "acquire.settle_frames",
+            "acquire.converge_frames",
+            "acquire.min_score",
+            "acquire.min_plate_area_px2",
+            "acquire.timeout_s",
+            "target.converge_frames",
+            "target.min_score",
+            "target.max_epipolar_px",
+            "target.timeout_s",
+            "plan.park_m",
+            "plan.settle_frames",
+            "plan.epipolar_tol_px",
+            "plan.disparity_margin",
+            "plan.disparity_margin_px",
+            "plan.mask_box_m",
+            "plan.mask_margin_px",
+            "plan.arm_clearance_m",
+            "plan.finger_thickness_m",
+            "plan.finger_breadth_m",
+            "plan.parallel_tolerance_deg",
+            "plan.object_tolerance_m",
+            "plan.max_view_angle_deg",
+            "plan.hypothesise_front_faces",
+            "plan.rear_edges_from_image",
+            "plan.join_m",
+            "plan.max_site_distance_m",
+            "plan.timeout_s",
+            "servo.gain",
+            "servo.max_step_m",
+            "servo.max_yaw_step_deg",
+            "servo.converged_m",
+            "servo.converged_deg",
+            "servo.converged_steps",
+            "servo.max_steps",
+            "servo.broyden",
+            "servo.max_across_px",
+            "servo.max_across_ratio",
+            "servo.yaw_lever_m",
+            "servo.min_condition",
+            "servo.angle_weight",
+            "servo.settle_frames",
+            "servo.speed_mps",
+            "servo.grasp_height_m",
+            "servo.local_cage_m",
+            "servo.standoff_above_m",
+            "servo.timeout_s",
+            "grasp.table_z_m",
+            "grasp.approach_speed_mps",
+            "grasp.close_s",
+            "grasp.lift_m",
+            "grasp.lift_speed_mps",
+            "grasp.min_grip_width_m",
+            "grasp.timeout_s",
+            "safety.workspace_min_m",
+            "safety.workspace_max_m",
+            "safety.max_state_jump_m",
+            "safety.state_stale_frames",
+            "safety.min_tracker_score",
+            "safety.min_target_score",
+            "tracker.points",
+            "tracker.search_px",
+            "tracker.min_contrast",
+            "tracker.projective",
+            "tracker.target_deformation_velocity_gain",
+            "tracker.passes",
+            "tracker.refine_search_px",
+            "tracker.short_first_px",
+        ];
+        before.sort();
+        assert_eq!(key_paths(&DaemonConfig::default().to_toml()), before);
+    }
+
+    #[test]
+    fn a_changed_file_round_trips_through_every_group() {
+        let mut cfg = DaemonConfig::default();
+        cfg.timing.done_hold_s = 1.5;
+        cfg.plan.park_m = vec![0.3, 0.0, 0.2];
+        cfg.plan.stereo.disparity_margin_px = 12.0;
+        cfg.plan.mask.mask_margin_px = 4.0;
+        cfg.plan.scene.rear_edges_from_image = false;
+        cfg.plan.grasp.max_site_distance_m = 0.05;
+        cfg.servo.control.gain = 0.4;
+        cfg.servo.limits.max_across_px = 20.0;
+        cfg.servo.convergence.max_steps = 40;
+        cfg.servo.approach.local_cage_m = 0.0;
+        let back = DaemonConfig::parse(&cfg.to_toml(), Path::new("x")).unwrap();
+        assert_eq!(back, cfg);
+        // The flattened keys are read from their table.
+        let cfg = DaemonConfig::parse("deadline_us = 2000\n[plan]\njoin_m = 0.006\n[servo]\nconverged_steps = 4\nspeed_mps = 0.05\n", Path::new("x")).unwrap();
+        assert_eq!((cfg.timing.deadline_us, cfg.plan.scene.join_m), (2000, 0.006));
+        assert_eq!((cfg.servo.convergence.converged_steps, cfg.servo.speed_mps), (4, 0.05));
+        assert_eq!(cfg.servo.control.gain, DaemonConfig::default().servo.control.gain);
+    }
+
+    #[test]
+    fn an_unknown_key_is_an_error_that_names_it_and_the_file() {
+        for (text, key) in [
+            ("[servo]\nconverged_mm = 0.5\n", "servo.converged_mm"),
+            ("[servo]\ngain = 0.4\ngian = 0.4\n", "servo.gian"),
+            ("[plan]\nmask_box = [[0.0, 1.0]]\n", "plan.mask_box"),
+            ("frame_rate = 30.0\n", "frame_rate"),
+            ("[gripper]\nmax_grip_m = 0.05\n", "gripper.max_grip_m"),
+            ("[servo.control]\ngain = 0.4\n", "servo.control"),
+            ("[timing]\nframe_rate_hz = 30.0\n", "timing"),
+            ("[vision]\n", "vision"),
+        ] {
+            let err = DaemonConfig::parse(text, Path::new("my.toml")).unwrap_err().to_string();
+            assert!(err.contains("my.toml") && err.contains(&format!("unknown key {key}")), "{text:?}: {err}");
+        }
+        // A value of the wrong type is named by its key, in a flattened group too.
+        for (text, key) in [
+            ("[servo]\nsettle_frames = 2\ngain = \"x\"\n", "servo.gain"),
+            ("[plan]\njoin_m = true\n", "plan.join_m"),
+            ("deadline_us = 10\nframe_rate_hz = \"fast\"\n[servo]\ngain = 0.4\n", "frame_rate_hz"),
+            ("[gripper]\nmax_opening_m = \"x\"\n", "gripper.max_opening_m"),
+            ("[servo]\nmax_steps = -1\n", "servo.max_steps"),
+        ] {
+            let err = DaemonConfig::parse(text, Path::new("my.toml")).unwrap_err().to_string();
+            assert!(err.contains("my.toml") && err.contains(&format!("{key}: ")), "{text:?}: {err}");
+        }
+        // A key that is a table's name used as a value is a type error, not an unknown key.
+        assert!(DaemonConfig::parse("servo = 1\n", Path::new("my.toml")).is_err());
     }
 
     #[test]

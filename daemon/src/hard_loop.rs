@@ -74,7 +74,7 @@ pub struct HardLoop {
 
 impl HardLoop {
     pub fn new(cfg: DaemonConfig, hint: Option<OperatorHint>) -> std::io::Result<Self> {
-        let deadline_ns = cfg.deadline_us * 1000;
+        let deadline_ns = cfg.timing.deadline_us * 1000;
         Ok(Self {
             mission: Mission::new(cfg, hint.as_ref())?,
             phase: PhaseState::AcquireGripper(AcquireGripper::new(0)),
@@ -135,7 +135,7 @@ impl HardLoop {
         self.frames += 1;
         let gap = self.last_frame_id.map_or(1, |last| frame_id.saturating_sub(last).max(1));
         self.last_frame_id = Some(frame_id);
-        let dt_s = gap as f64 / self.mission.cfg.frame_rate_hz;
+        let dt_s = gap as f64 / self.mission.cfg.timing.frame_rate_hz;
         let states = self.mission.trackers.update(left, right, dt_s);
         let cmd = self.decide(frame_index, frame_id, left, right, states);
         let phase = self.phase.phase();
@@ -313,7 +313,7 @@ impl HardLoop {
     pub fn finished(&self) -> bool {
         match self.phase {
             PhaseState::Failed | PhaseState::Stopped => true,
-            PhaseState::Done { since_frame } => self.frames.saturating_sub(since_frame) > self.mission.cfg.frames(self.mission.cfg.done_hold_s),
+            PhaseState::Done { since_frame } => self.frames.saturating_sub(since_frame) > self.mission.cfg.frames(self.mission.cfg.timing.done_hold_s),
             _ => false,
         }
     }

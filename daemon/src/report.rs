@@ -216,8 +216,8 @@ pub fn plan_overlay(p: &crate::planning::PlanOutput) -> RgbImage {
     let s = &p.summary;
     for k in 0..2 {
         let dx = f64::from(k as u32 * w);
-        polygon(&mut img, &s.masks_px[k], dx, MASK);
-        for (i, f) in s.facets.iter().enumerate() {
+        polygon(&mut img, &s.inputs.masks_px[k], dx, MASK);
+        for (i, f) in s.scene.facets.iter().enumerate() {
             let colour = if f.hypothesised {
                 HYPOTHESISED
             } else if f.component.is_some() {
@@ -230,18 +230,18 @@ pub fn plan_overlay(p: &crate::planning::PlanOutput) -> RgbImage {
         if let Some(t) = &p.target {
             polygon(&mut img, if k == 0 { &t.left_px } else { &t.right_px }, dx, CHOSEN);
         }
-        let at = |site: &crate::planning::SiteSummary| if k == 0 { site.site_left_px } else { site.site_right_px };
-        for r in &s.rejected_sites {
+        let at = |site: &crate::planning::SiteSummary| if k == 0 { site.place.site_left_px } else { site.place.site_right_px };
+        for r in &s.sites.rejected_sites {
             cross(&mut img, at(r), dx, 2.0, REJECTED);
         }
-        for c in &s.candidates {
+        for c in &s.sites.candidates {
             ring(&mut img, at(c), dx, 4.0, CANDIDATE);
         }
-        if let Some(c) = &s.chosen {
+        if let Some(c) = &s.sites.chosen {
             ring(&mut img, at(c), dx, 6.0, CHOSEN);
             cross(&mut img, at(c), dx, 3.0, CHOSEN);
         }
-        if let Some(ip) = s.indicated_px {
+        if let Some(ip) = s.inputs.indicated_px {
             cross(&mut img, ip[k], dx, 5.0, INDICATED);
         }
     }

@@ -72,8 +72,8 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     let mut states = MessageSubscriber::<RobotState>::create(&node)?;
     let mut commands = MessagePublisher::<RobotCommand>::create(&node)?;
     let mut telemetry = MessagePublisher::<Telemetry>::create(&node)?;
-    let stale = Duration::from_millis(options.config.stale_frame_ms);
-    let start_timeout = Duration::from_secs_f64(options.config.start_timeout_s);
+    let stale = Duration::from_millis(options.config.timing.stale_frame_ms);
+    let start_timeout = Duration::from_secs_f64(options.config.timing.start_timeout_s);
     let mut report = options.report_dir.as_deref().map(ReportWriter::new).transpose()?;
     let mut hl = HardLoop::new(options.config, options.hint)?;
     hl.set_indicated_point(options.indicated_point_m);
@@ -166,8 +166,8 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
         Some(mut rep) => {
             rep.submit(ReportJob::ServoPlot {
                 rows: outcome.servo_trace.clone(),
-                tolerance_mm: hl.config().servo.converged_m * 1e3,
-                tolerance_deg: hl.config().servo.converged_deg,
+                tolerance_mm: hl.config().servo.convergence.converged_m * 1e3,
+                tolerance_deg: hl.config().servo.convergence.converged_deg,
             });
             rep.finish()
         }

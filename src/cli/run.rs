@@ -209,12 +209,12 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         None => DaemonConfig::default(),
     };
     config.calibration.cage_m = scenario.cage.points_m.clone();
-    config.frame_rate_hz = f64::from(scenario.render.frame_rate_hz);
+    config.timing.frame_rate_hz = f64::from(scenario.render.frame_rate_hz);
     // Lockstep: the simulator renders frame N+1 only after the daemon answered frame N, so a
     // slow render on a loaded machine is not a stale camera (2 s was exceeded once on the
     // 2-core machine with other builds running). A simulator that is gone is still
     // noticed within ~100 ms by the stream's liveness check.
-    config.stale_frame_ms = config.stale_frame_ms.max(5000);
+    config.timing.stale_frame_ms = config.timing.stale_frame_ms.max(5000);
     config.validate(&dir.join("daemon.toml"))?;
     std::fs::write(dir.join("daemon.toml"), config.to_toml())?;
     let domain = args.domain.clone().unwrap_or_else(|| Domain::unique("run"));
@@ -350,9 +350,9 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         targeted_block: targeted.map(|t| t.block.clone()),
         targeted_face: targeted.map(|t| t.face.clone()),
         indicated_point_m: point,
-        plan_facets: plan.map(|p| p.facets.len()),
-        plan_candidates: plan.map(|p| p.candidates.len()),
-        plan_width_mm: plan.and_then(|p| p.chosen.as_ref()).map(|c| c.width_mm),
+        plan_facets: plan.map(|p| p.scene.facets.len()),
+        plan_candidates: plan.map(|p| p.sites.candidates.len()),
+        plan_width_mm: plan.and_then(|p| p.sites.chosen.as_ref()).map(|c| c.grasp.width_mm),
         planner_ms: planning.map(|p| p.planner_ms),
         planning_frames: planning.map(|p| p.frames),
         gripper_updates_while_planning: planning.map(|p| p.gripper_updates),

@@ -40,7 +40,7 @@ pub struct Mission {
 impl Mission {
     pub fn new(cfg: DaemonConfig, hint: Option<&OperatorHint>) -> std::io::Result<Self> {
         let plate = PlateTemplate::new(&cfg.gripper);
-        let servo = ServoRecord::new(cfg.servo.max_steps);
+        let servo = ServoRecord::new(cfg.servo.convergence.max_steps);
         Ok(Self {
             cfg,
             plate,

@@ -61,7 +61,7 @@ impl Grasp {
                         // configured height above the table, or the planned one (the
                         // fingers' tips at the low-water mark the plan's collision test
                         // cleared) when it is higher.
-                        let floor = m.cfg.grasp.table_z_m + m.cfg.servo.grasp_height_m;
+                        let floor = m.cfg.grasp.table_z_m + m.cfg.servo.approach.grasp_height_m;
                         let z = m.targeting.target().and_then(|t| t.grasp_tool_z_m).map_or(floor, |z| z.max(floor));
                         let dz = z - f64::from(c.robot.tool_pos_m[2]);
                         Step::Stay(Cmd::move_by([0.0, 0.0, dz], 0.0, speed))

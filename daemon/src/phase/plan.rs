@@ -86,7 +86,7 @@ fn gripper_masks(m: &Mission, yaw_rad: f64) -> Option<[Vec<[f64; 2]>; 2]> {
     let n = Vector3::new(c * n0[0] - s * n0[1], s * n0[0] + c * n0[1], 0.0).try_normalize(1e-12)?;
     let up = Vector3::z();
     let a = up.cross(&n);
-    let b = &m.cfg.plan.mask_box_m;
+    let b = &m.cfg.plan.mask.mask_box_m;
     let mut masks: [Vec<[f64; 2]>; 2] = [Vec::new(), Vec::new()];
     for (k, view) in View::ALL.into_iter().enumerate() {
         let t = m.trackers.get(Role::Gripper, view)?;
@@ -159,18 +159,18 @@ impl PlanPhase {
                 let lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw));
                 let p = &m.cfg.plan;
                 let mut planner = PlannerConfig::default();
-                planner.matching.epipolar_tol_px = p.epipolar_tol_px;
+                planner.matching.epipolar_tol_px = p.stereo.epipolar_tol_px;
                 let grasp = GraspConfig {
                     gripper: GripperModel {
-                        finger_thickness_m: p.finger_thickness_m,
-                        finger_breadth_m: p.finger_breadth_m,
+                        finger_thickness_m: p.grasp.finger_thickness_m,
+                        finger_breadth_m: p.grasp.finger_breadth_m,
                         jaw_opening_m: Some(m.cfg.gripper.max_opening_m.max(m.cfg.gripper.max_grasp_width_m)),
                         max_width_m: m.cfg.gripper.max_grasp_width_m,
                         ..GripperModel::default()
                     },
-                    max_view_angle_rad: p.max_view_angle_deg.min(90.0).to_radians(),
-                    parallel_tolerance_rad: p.parallel_tolerance_deg.min(45.0).to_radians(),
-                    object_tolerance_m: p.object_tolerance_m,
+                    max_view_angle_rad: p.grasp.max_view_angle_deg.min(90.0).to_radians(),
+                    parallel_tolerance_rad: p.grasp.parallel_tolerance_deg.min(45.0).to_radians(),
+                    object_tolerance_m: p.grasp.object_tolerance_m,
                     ..GraspConfig::default()
                 };
                 // Allocates once: the pair the planner works on.
@@ -183,19 +183,19 @@ impl PlanPhase {
                         lever_m: [lever.x, lever.y, lever.z],
                     },
                     masks,
-                    mask_margin_px: p.mask_margin_px,
+                    mask_margin_px: p.mask.mask_margin_px,
                     scene: SceneLimits {
                         indicated_m: m.targeting.indicated_m(),
-                        max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.arm_clearance_m,
-                        max_distance_m: p.max_site_distance_m,
-                        join_m: p.join_m,
-                        front_faces_to_table_z_m: p.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
-                        rear_edges_from_image: p.rear_edges_from_image,
+                        max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.scene.arm_clearance_m,
+                        max_distance_m: p.grasp.max_site_distance_m,
+                        join_m: p.scene.join_m,
+                        front_faces_to_table_z_m: p.scene.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
+                        rear_edges_from_image: p.scene.rear_edges_from_image,
                     },
                     planner,
                     grasp,
-                    disparity_margin: p.disparity_margin,
-                    disparity_margin_px: p.disparity_margin_px,
+                    disparity_margin: p.stereo.disparity_margin,
+                    disparity_margin_px: p.stereo.disparity_margin_px,
                 };
                 match PendingJob::submit(&mut m.worker, c.frame_index, move || Box::new(crate::planning::plan(request))) {
                     Some(job) => {
@@ -214,8 +214,8 @@ impl PlanPhase {
                 let stats = PlanningStats {
                     frames: c.frame_index - job.submitted_frame(),
                     gripper_updates: [now[0] - self.updates_at_submit[0], now[1] - self.updates_at_submit[1]],
-                    planner_ms: out.summary.planner_ms,
-                    total_ms: out.summary.total_ms,
+                    planner_ms: out.summary.timing.planner_ms,
+                    total_ms: out.summary.timing.total_ms,
                 };
                 let summary = out.summary.clone();
                 let target = out.target.clone();
@@ -223,17 +223,17 @@ impl PlanPhase {
                 m.planning.record(summary.clone(), stats);
                 m.reporting.plan(out);
                 let Some(t) = target else {
-                    if let (Some(nearest), Some(_)) = (summary.candidates.first(), m.targeting.indicated_m()) {
+                    if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
                         return Step::fail(FailureKind::NoGraspSite, format!(
                             "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away)",
-                            m.cfg.plan.max_site_distance_m * 1e3,
-                            nearest.distance_mm.unwrap_or(f64::NAN)
+                            m.cfg.plan.grasp.max_site_distance_m * 1e3,
+                            nearest.place.distance_mm.unwrap_or(f64::NAN)
                         ));
                     }
-                    let reasons: Vec<String> = summary.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
+                    let reasons: Vec<String> = summary.sites.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
                     return Step::fail(FailureKind::NoGraspSite, format!(
                         "plan: no grasp site ({} facets; rejected: {})",
-                        summary.facets.len(),
+                        summary.scene.facets.len(),
                         if reasons.is_empty() { "none found".into() } else { reasons.join(", ") }
                     ));
                 };

@@ -214,19 +214,19 @@ impl ServoPhase {
         let depth_m = target_spec.depth_m.max(0.0);
         let s = m.cfg.servo.clone();
         let config = ServoConfig {
-            gain: s.gain,
-            max_step_m: s.max_step_m,
-            max_yaw_step_rad: s.max_yaw_step_deg.to_radians(),
-            converged_m: s.converged_m,
-            converged_rad: s.converged_deg.to_radians(),
-            converged_steps: s.converged_steps,
-            max_steps: s.max_steps,
-            broyden: s.broyden,
-            max_across_px: s.max_across_px,
-            max_across_ratio: s.max_across_ratio,
-            yaw_lever_m: s.yaw_lever_m,
-            min_condition: s.min_condition,
-            angle_weight: s.angle_weight,
+            gain: s.control.gain,
+            max_step_m: s.limits.max_step_m,
+            max_yaw_step_rad: s.limits.max_yaw_step_deg.to_radians(),
+            converged_m: s.convergence.converged_m,
+            converged_rad: s.convergence.converged_deg.to_radians(),
+            converged_steps: s.convergence.converged_steps,
+            max_steps: s.convergence.max_steps,
+            broyden: s.control.broyden,
+            max_across_px: s.limits.max_across_px,
+            max_across_ratio: s.limits.max_across_ratio,
+            yaw_lever_m: s.control.yaw_lever_m,
+            min_condition: s.control.min_condition,
+            angle_weight: s.control.angle_weight,
             ..ServoConfig::default()
         };
         let servo = CoplanarityServo::new(cal.servo_model, config).map_err(|e| unusable(format!("servo: {e}")))?;
@@ -252,7 +252,7 @@ impl ServoPhase {
         // the model's scale), the tool above the facet's centre at the stand-off height with
         // the jaws behind the facet plane; the grasp then moves by metric offsets that the
         // robot's own kinematics make exact.
-        let tool_z = m.cfg.grasp.table_z_m + s.grasp_height_m + s.standoff_above_m;
+        let tool_z = m.cfg.grasp.table_z_m + s.approach.grasp_height_m + s.approach.standoff_above_m;
         let t = m.cfg.gripper.tool_from_reference_m;
         // Reference point relative to the facet origin: in the facet plane, straight above
         // the planned site (the origin when there is none).
@@ -288,8 +288,8 @@ impl ServoPhase {
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.timeout_s) {
-            return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.timeout_s, m.servo.steps()));
+        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.convergence.timeout_s) {
+            return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.convergence.timeout_s, m.servo.steps()));
         }
         // Every frame adds to the target's running means (it stands still; the arm moves).
         if let Ok((target, _)) = views(m) {
@@ -312,7 +312,7 @@ impl ServoPhase {
             Stage::Approach => {
                 self.wait = Some(MoveWait::new(c.seq, c.frame_index));
                 let (p, yaw) = self.approach_pose;
-                self.stage = if m.cfg.servo.local_cage_m > 0.0 {
+                self.stage = if m.cfg.servo.approach.local_cage_m > 0.0 {
                     self.target_cage = TargetMean::default();
                     Stage::LocalCage { i: 0, n: 0 }
                 } else {
@@ -392,7 +392,7 @@ impl ServoPhase {
         if i + 1 < LOCAL_CAGE.len() {
             self.stage = Stage::LocalCage { i: i + 1, n: 0 };
             self.wait = Some(MoveWait::new(c.seq, c.frame_index));
-            let d = m.cfg.servo.local_cage_m;
+            let d = m.cfg.servo.approach.local_cage_m;
             let (p0, yaw) = self.approach_pose;
             let o = LOCAL_CAGE[i + 1];
             m.reporting.set_status("servo: local cage around the approach pose");

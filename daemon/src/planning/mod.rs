@@ -126,32 +126,80 @@ pub struct FacetSummary {
     pub hypothesised: bool,
 }
 
-/// A grasp site, as the report shows it.
+/// A grasp site, as the report shows it. One flat JSON object: the groups are flattened.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SiteSummary {
     pub plan_facet: usize,
     /// The site's facet was hypothesised below the top face `plan_facet`.
     pub hypothesised_facet: bool,
-    pub width_mm: f64,
-    pub site_m: [f64; 3],
-    pub centre_m: [f64; 3],
-    pub tool_m: Option<[f64; 3]>,
-    pub yaw_deg: Option<f64>,
-    pub site_left_px: [f64; 2],
-    pub site_right_px: [f64; 2],
-    /// Plan-view distance of the grasp centre from the indicated point, mm.
-    pub distance_mm: Option<f64>,
+    #[serde(flatten)]
+    pub grasp: SiteGrasp,
+    #[serde(flatten)]
+    pub place: SitePlace,
     /// Why it was rejected (`None` for a candidate).
     pub reason: Option<String>,
 }
 
-/// What the planner found and decided (`plan.json`, and the outcome's `plan`).
+/// The grasp at a site: its width and, for a candidate, the tool pose.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SiteGrasp {
+    pub width_mm: f64,
+    pub tool_m: Option<[f64; 3]>,
+    pub yaw_deg: Option<f64>,
+}
+
+/// Where a site is: robot frame, both views, and how far from the indicated point.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SitePlace {
+    pub site_m: [f64; 3],
+    pub centre_m: [f64; 3],
+    pub site_left_px: [f64; 2],
+    pub site_right_px: [f64; 2],
+    /// Plan-view distance of the grasp centre from the indicated point, mm.
+    pub distance_mm: Option<f64>,
+}
+
+/// What the planner found and decided (`plan.json`, and the outcome's `plan`). One flat
+/// JSON object: the groups are flattened.
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct PlanSummary {
+    #[serde(flatten)]
+    pub counts: PlannerCounts,
+    #[serde(flatten)]
+    pub scene: SceneRecord,
+    #[serde(flatten)]
+    pub sites: SiteRecord,
+    #[serde(flatten)]
+    pub inputs: PlanInputs,
+    #[serde(flatten)]
+    pub geometry: PlanGeometry,
+    #[serde(flatten)]
+    pub timing: PlanTiming,
+}
+
+/// How much the planner found: segments in each view, stereo matches, planes.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct PlannerCounts {
     pub segments: [usize; 2],
     pub matches: usize,
     pub planes: usize,
+}
+
+/// The grasp scene: the planner's facets and hypothesised faces, what was left out of it,
+/// and the rear edges found in the images.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct SceneRecord {
     pub facets: Vec<FacetSummary>,
+    /// Planner facets left out for a hypothesised face that covers them in both views.
+    pub superseded_facets: Vec<usize>,
+    /// Rear edges found in the images behind vertical faces near the indicated point:
+    /// `(plan facet of the face, depth behind it in mm, edge support 0..1 in the weaker view)`.
+    pub image_rear_edges: Vec<(usize, f64, f64)>,
+}
+
+/// The grasp sites: candidates, the chosen one, and what failed which rule.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct SiteRecord {
     /// The highest collision-free site of each facet that has one, preferred first.
     pub candidates: Vec<SiteSummary>,
     pub chosen: Option<SiteSummary>,
@@ -161,17 +209,22 @@ pub struct PlanSummary {
     pub rejected_by_reason: BTreeMap<String, usize>,
     /// Facets and top edges that failed a rule before a site existed: `(plan facet, reason)`.
     pub facet_rejections: Vec<(usize, String)>,
-    /// Planner facets left out for a hypothesised face that covers them in both views.
-    pub superseded_facets: Vec<usize>,
-    /// Rear edges found in the images behind vertical faces near the indicated point:
-    /// `(plan facet of the face, depth behind it in mm, edge support 0..1 in the weaker view)`.
-    pub image_rear_edges: Vec<(usize, f64, f64)>,
+}
+
+/// What the planner was given besides the images: the indicated point and the gripper's mask.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct PlanInputs {
     pub indicated_m: Option<[f64; 3]>,
     /// The indicated point in both views, tracker pixels.
     pub indicated_px: Option<[[f64; 2]; 2]>,
     /// The gripper's masked region in both views, tracker pixels.
     pub masks_px: [Vec<[f64; 2]>; 2],
     pub masked_px: [usize; 2],
+}
+
+/// The stereo geometry the planner used.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct PlanGeometry {
     /// The model the planner used (scene points to planner pixels: `handeye plan --calib`
     /// reads this object): `m` rows, `c`, `disparity_range_px`, `residual_rms_px`.
     pub model: Option<serde_json::Value>,
@@ -179,6 +232,11 @@ pub struct PlanSummary {
     pub bootstrap_rms_px: Option<[f64; 2]>,
     /// RMS residual of the pinhole cameras fitted to the cage (`None`: affine model only), px.
     pub projective_residual_px: Option<f64>,
+}
+
+/// How long the plan took: the planner alone and the whole plan, ms.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct PlanTiming {
     pub planner_ms: f64,
     pub total_ms: f64,
 }
@@ -312,7 +370,7 @@ fn rear_edges_from_image(
     let count = added.len();
     let mut drop = vec![false; ps.scene.facets.len()];
     for (k, component, segment, top_face, d, support) in added {
-        summary.image_rear_edges.push((ps.facets[k].plan_facet, d * 1e3, support));
+        summary.scene.image_rear_edges.push((ps.facets[k].plan_facet, d * 1e3, support));
         ps.scene.edges.push(handeye_vision::grasp::SceneEdge { segment, component });
         ps.edge_matches.push(IMAGE_REAR_EDGE);
         let left: Vec<[f64; 2]> = top_face.iter().map(|p| [p[0][0] + PLANNER_FROM_TRACKER_PX, p[0][1] + PLANNER_FROM_TRACKER_PX]).collect();
@@ -330,8 +388,8 @@ fn rear_edges_from_image(
     }
     for j in (0..drop.len()).rev() {
         if drop[j] {
-            summary.superseded_facets.push(ps.facets[j].plan_facet);
-            *summary.rejected_by_reason.entry("superseded_by_image_top_face".into()).or_insert(0) += 1;
+            summary.scene.superseded_facets.push(ps.facets[j].plan_facet);
+            *summary.sites.rejected_by_reason.entry("superseded_by_image_top_face".into()).or_insert(0) += 1;
             ps.facets.remove(j);
             ps.scene.facets.remove(j);
         }
@@ -347,16 +405,19 @@ fn arr3(v: &Vector3<f64>) -> [f64; 3] {
 pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let start = Instant::now();
     let mut summary = PlanSummary {
-        indicated_m: req.scene.indicated_m,
-        indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
-        masks_px: req.masks.clone(),
+        inputs: PlanInputs {
+            indicated_m: req.scene.indicated_m,
+            indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
+            masks_px: req.masks.clone(),
+            ..Default::default()
+        },
         ..Default::default()
     };
     for (k, img) in req.images.iter_mut().enumerate() {
-        summary.masked_px[k] = mask_and_fill(img, &req.masks[k], req.mask_margin_px);
+        summary.inputs.masked_px[k] = mask_and_fill(img, &req.masks[k], req.mask_margin_px);
     }
     let scene_model = scene_model(&req.calibration.model, &req.calibration.lever_m);
-    summary.model = Some(serde_json::json!({
+    summary.geometry.model = Some(serde_json::json!({
         "m": (0..4).map(|r| [scene_model.m[(r, 0)], scene_model.m[(r, 1)], scene_model.m[(r, 2)]]).collect::<Vec<_>>(),
         "c": [scene_model.c[0], scene_model.c[1], scene_model.c[2], scene_model.c[3]],
         "disparity_range_px": scene_model.disparity_range_px,
@@ -373,14 +434,14 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
     }
-    summary.projective_residual_px = geo.projective.as_ref().map(|p| p.residual_rms_px);
+    summary.geometry.projective_residual_px = geo.projective.as_ref().map(|p| p.residual_rms_px);
     let t0 = Instant::now();
     let plan = Planner::new(req.planner).plan(&req.images[0].view(), &req.images[1].view(), &geo);
-    summary.planner_ms = t0.elapsed().as_secs_f64() * 1e3;
-    summary.segments = [plan.left_segments.len(), plan.right_segments.len()];
-    summary.matches = plan.matches.len();
-    summary.planes = plan.planes.len();
-    summary.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
+    summary.timing.planner_ms = t0.elapsed().as_secs_f64() * 1e3;
+    summary.counts.segments = [plan.left_segments.len(), plan.right_segments.len()];
+    summary.counts.matches = plan.matches.len();
+    summary.counts.planes = plan.planes.len();
+    summary.geometry.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
     let mut ps = scene_from_plan(&plan, toward, req.scene.max_height_m, req.scene.join_m);
     let planned_facets = ps.facets.len();
     if let Some(table_z) = req.scene.front_faces_to_table_z_m {
@@ -404,7 +465,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             } else {
                 ps.facets.remove(k);
                 ps.scene.facets.remove(k);
-                *summary.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
+                *summary.sites.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
             }
         }
         // A hypothesised face (anchored on a top face's edge and the table, its bottom edge
@@ -422,11 +483,11 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                     && geom::covered_share(&src.right_px, &ps.facets[k].right_px) >= SUPERSEDED_SHARE
             });
             if superseded {
-                summary.superseded_facets.push(src.plan_facet);
+                summary.scene.superseded_facets.push(src.plan_facet);
                 ps.facets.remove(j);
                 ps.scene.facets.remove(j);
                 hypothesised_start -= 1;
-                *summary.rejected_by_reason.entry("superseded_by_hypothesised_face".into()).or_insert(0) += 1;
+                *summary.sites.rejected_by_reason.entry("superseded_by_hypothesised_face".into()).or_insert(0) += 1;
             } else {
                 j += 1;
             }
@@ -436,7 +497,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
     for (fi, f) in plan.facets.iter().enumerate() {
         let component = ps.facets.iter().position(|src| !src.hypothesised && src.plan_facet == fi).map(|k| ps.scene.facets[k].component);
-        summary.facets.push(FacetSummary {
+        summary.scene.facets.push(FacetSummary {
             plan_facet: fi,
             left_px: to_tracker(&f.facet.left),
             right_px: to_tracker(&f.facet.right),
@@ -446,7 +507,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         });
     }
     for (k, src) in ps.facets.iter().enumerate().skip(planned_facets) {
-        summary.facets.push(FacetSummary {
+        summary.scene.facets.push(FacetSummary {
             plan_facet: src.plan_facet,
             left_px: to_tracker(&src.left_px),
             right_px: to_tracker(&src.right_px),
@@ -459,8 +520,8 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let mut grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
         Ok(g) => g,
         Err(e) => {
-            summary.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
-            summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
+            summary.sites.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
+            summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
             return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images };
         }
     };
@@ -485,20 +546,20 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         SiteSummary {
             plan_facet: ps.facets[site.facet].plan_facet,
             hypothesised_facet: ps.facets[site.facet].hypothesised,
-            width_mm: site.width_m * 1e3,
-            site_m: arr3(&site.front_m),
-            centre_m: arr3(&site.centre_m),
-            tool_m: g.map(|g| arr3(&g.tool_m)),
-            yaw_deg: g.map(|g| g.yaw_rad.to_degrees()),
-            site_left_px: px[0],
-            site_right_px: px[1],
-            distance_mm: indicated.map(|p| (site.centre_m.xy() - p.xy()).norm() * 1e3),
+            grasp: SiteGrasp { width_mm: site.width_m * 1e3, tool_m: g.map(|g| arr3(&g.tool_m)), yaw_deg: g.map(|g| g.yaw_rad.to_degrees()) },
+            place: SitePlace {
+                site_m: arr3(&site.front_m),
+                centre_m: arr3(&site.centre_m),
+                site_left_px: px[0],
+                site_right_px: px[1],
+                distance_mm: indicated.map(|p| (site.centre_m.xy() - p.xy()).norm() * 1e3),
+            },
             reason,
         }
     };
     for r in &grasps.rejected {
         let name = reason_name(&r.reason);
-        *summary.rejected_by_reason.entry(name.to_string()).or_insert(0) += 1;
+        *summary.sites.rejected_by_reason.entry(name.to_string()).or_insert(0) += 1;
         if r.site.is_none() {
             let detail = match r.reason {
                 RejectReason::FacetNotVertical { tilt_rad } => format!("{name} ({:.0}°)", tilt_rad.to_degrees()),
@@ -506,7 +567,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 RejectReason::TopEdgeTooSteep { slope_rad } => format!("{name} ({:.0}°)", slope_rad.to_degrees()),
                 _ => name.to_string(),
             };
-            summary.facet_rejections.push((ps.facets[r.facet].plan_facet, detail));
+            summary.sites.facet_rejections.push((ps.facets[r.facet].plan_facet, detail));
         }
         if let Some(site) = &r.site {
             let detail = match r.reason {
@@ -524,17 +585,17 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 RejectReason::TooWide { width_m } => format!("{name} ({:.0} mm)", width_m * 1e3),
                 _ => name.to_string(),
             };
-            summary.rejected_sites.push(site_summary(None, site, Some(detail)));
+            summary.sites.rejected_sites.push(site_summary(None, site, Some(detail)));
         }
     }
-    summary.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
+    summary.sites.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
     // The block nearest the point has no grasp site if the nearest site is far from it.
     let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.scene.max_distance_m);
     let chosen = grasps.chosen.filter(near);
     if grasps.chosen.is_some() && chosen.is_none() {
-        summary.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
+        summary.sites.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
     }
-    summary.chosen = chosen.as_ref().and_then(|_| summary.candidates.first().cloned());
+    summary.sites.chosen = chosen.as_ref().and_then(|_| summary.sites.candidates.first().cloned());
     let planned = |g: &Grasp| {
         let src = &ps.facets[g.site.facet];
         let cyclopean: Vec<[f64; 2]> = src.left_px.iter().zip(&src.right_px).map(|(l, r)| [(l[0] + r[0]) / 2.0, (l[1] + r[1]) / 2.0]).collect();
@@ -551,7 +612,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     };
     let target = chosen.as_ref().map(planned);
     let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
-    summary.total_ms = start.elapsed().as_secs_f64() * 1e3;
+    summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
     PlanOutput { summary, target, alternatives, images: req.images }
 }
 
@@ -580,5 +641,54 @@ mod tests {
         let sm = scene_model(&model, &lever);
         let back = sm.reconstruct(&[l[0] + 0.5, l[1] + 0.5, r[0] + 0.5, r[1] + 0.5]);
         assert!((back - p).norm() < 1e-9, "{back:?}");
+    }
+}
+
+#[cfg(test)]
+mod json_shape_tests {
+    use super::*;
+
+    fn sorted_keys(value: &serde_json::Value) -> Vec<String> {
+        let mut keys: Vec<String> = value.as_object().unwrap().keys().cloned().collect();
+        keys.sort();
+        keys
+    }
+
+    #[test]
+    fn plan_json_keeps_its_flat_shape_and_reads_back() {
+        let site = SiteSummary {
+            plan_facet: 3,
+            hypothesised_facet: true,
+            grasp: SiteGrasp { width_mm: 30.5, tool_m: Some([0.3, 0.0, 0.02]), yaw_deg: Some(12.0) },
+            place: SitePlace { site_m: [0.3, 0.01, 0.03], centre_m: [0.31, 0.01, 0.03], site_left_px: [100.0, 200.0], site_right_px: [90.0, 200.0], distance_mm: None },
+            reason: None,
+        };
+        let mut summary = PlanSummary::default();
+        summary.counts.segments = [40, 42];
+        summary.sites.candidates = vec![site.clone()];
+        summary.sites.chosen = Some(site.clone());
+        summary.sites.rejected_by_reason.insert("too_wide".into(), 2);
+        summary.sites.facet_rejections.push((1, "no_top_edge".into()));
+        summary.scene.image_rear_edges.push((3, 25.0, 0.8));
+        summary.geometry.model = Some(serde_json::json!({ "c": [1.0, 2.0, 3.0, 4.0] }));
+        summary.timing.total_ms = 12.5;
+        let value = serde_json::to_value(&summary).unwrap();
+        // The keys of plan.json before its fields were grouped.
+        let mut expected = vec![
+            "segments", "matches", "planes", "facets", "candidates", "chosen", "rejected_sites", "rejected_by_reason",
+            "facet_rejections", "superseded_facets", "image_rear_edges", "indicated_m", "indicated_px", "masks_px", "masked_px",
+            "model", "bootstrap_rms_px", "projective_residual_px", "planner_ms", "total_ms",
+        ];
+        expected.sort_unstable();
+        assert_eq!(sorted_keys(&value), expected);
+        let mut site_keys = vec![
+            "plan_facet", "hypothesised_facet", "width_mm", "site_m", "centre_m", "tool_m", "yaw_deg", "site_left_px",
+            "site_right_px", "distance_mm", "reason",
+        ];
+        site_keys.sort_unstable();
+        assert_eq!(sorted_keys(&value["chosen"]), site_keys);
+        assert_eq!(value["chosen"]["distance_mm"], serde_json::Value::Null);
+        let back: PlanSummary = serde_json::from_value(value.clone()).unwrap();
+        assert_eq!(serde_json::to_value(&back).unwrap(), value);
     }
 }
