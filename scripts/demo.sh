@@ -4,8 +4,8 @@
 #   `handeye run scenarios/pick_cube.toml --out out/demo` starts the simulator (lockstep,
 #   rendering the stereo pair headless) and the daemon as two processes in a private
 #   shared-memory domain. The daemon acquires the gripper by opening and closing the jaws,
-#   calibrates the cameras on a cage of eight points, tracks the cube's facet from the
-#   operator hint, servoes the gripper plate coplanar with it, grasps and lifts; the
+#   calibrates the cameras on a cage of eight points, plans a grasp on one stereo pair,
+#   tracks the chosen facet, servoes the gripper plate coplanar with it, grasps and lifts; the
 #   simulator judges the result from ground truth. The report folder gets overlay PNGs of
 #   both views at the key moments (trackers drawn), the servo error plot, and the JSONs.
 #
@@ -33,6 +33,7 @@ fi
 echo "demo: handeye run $SCENARIO (simulator + daemon, two processes over shared memory)"
 status=0
 "$BIN" run "$SCENARIO" --out "$OUT" || status=$?
-echo "demo: report in $OUT/: overlays (NN_<moment>.png: both views, trackers drawn), servo_error.png,"
-echo "      run.json (merged verdict), daemon.json, sim.json, hint.json, daemon.toml, *.stderr.log"
+echo "demo: report in $OUT/: overlays (NN_<moment>.png: both views, trackers drawn), the plan (NN_plan.png,"
+echo "      plan.json), servo_convergence.svg, run.json (merged verdict), daemon.json, sim.json, hint.json,"
+echo "      daemon.toml, *.stderr.log"
 exit $status
