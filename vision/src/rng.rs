@@ -1,4 +1,5 @@
-//! The workspace's one seeded random generator (SplitMix64).
+//! The workspace's seeded random generators: SplitMix64 for everything, and the xorshift64
+//! that the planner's synthetic scenes were made with ([`XorShift64`], for them alone).
 //!
 //! Everything random in handeye is reproducible from a seed: the simulator's block shades,
 //! layouts and sensor noise, the synthetic images and noise of the tests, the planner's test
@@ -61,6 +62,48 @@ impl SplitMix64 {
     }
 }
 
+/// Marsaglia's xorshift64 (shifts 13, 7, 17): kept only for the planner's synthetic scenes.
+///
+/// [`planner::synth`](crate::planner::synth) draws its box layouts and image noise from this
+/// stream, and the planner's synthetic acceptance measures (`tests/planner_synthetic.rs`:
+/// found rate over ten seeded layouts, the bootstrap's recovery) were set on it; on
+/// SplitMix64's layouts they do not hold as they stand (86 % found, or a bootstrap that does
+/// not re-match). Moving those scenes to SplitMix64 means re-baselining those tests, which is
+/// a decision of its own. **New code should use [`SplitMix64`]**: this one has a weaker
+/// output (no final mix) and a state of zero that never leaves zero.
+#[derive(Debug, Clone)]
+pub struct XorShift64 {
+    state: u64,
+}
+
+impl XorShift64 {
+    /// The generator with state `state`, which must not be zero (zero stays zero for ever;
+    /// the synthetic scenes set the low bit).
+    pub const fn new(state: u64) -> Self {
+        Self { state }
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.state;
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        self.state = x;
+        x
+    }
+
+    /// Uniform in [0, 1): the top 24 bits.
+    pub fn uniform(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Approximately standard normal (sum of four uniforms, rescaled).
+    pub fn gauss(&mut self) -> f32 {
+        let s: f32 = (0..4).map(|_| self.uniform()).sum();
+        (s - 2.0) * (3.0f32).sqrt()
+    }
+}
+
 /// The SplitMix64 finaliser: a bijective 64-bit mix, used to derive independent seeds from
 /// one (per block, per frame, per purpose).
 pub fn mix64(mut z: u64) -> u64 {
@@ -104,5 +147,16 @@ mod tests {
         let mean = xs.iter().sum::<f64>() / xs.len() as f64;
         let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / xs.len() as f64;
         assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.05, "mean {mean} var {var}");
+    }
+
+    #[test]
+    fn the_xorshift_stream_is_the_synthetic_scenes_one() {
+        // xorshift64 (13, 7, 17) from state 1234567: the planner's synthetic layouts and
+        // noise, and the acceptance measures set on them, depend on exactly this stream.
+        let mut r = XorShift64::new(1_234_567);
+        let first: Vec<u64> = (0..3).map(|_| r.next_u64()).collect();
+        assert_eq!(first, [1_333_627_000_697_578, 14_261_447_996_154_253_071, 3_585_844_736_910_023_377]);
+        let mut r = XorShift64::new(1_234_567);
+        assert_eq!(r.uniform(), (1_333_627_000_697_578u64 >> 40) as f32 / (1u64 << 24) as f32);
     }
 }

@@ -21,9 +21,9 @@ use std::collections::{HashSet, VecDeque};
 use super::geom::{self, P2};
 use super::matching::{Candidates, EpipolarFrame, Friendship};
 use super::planes::{Plane, Transfer, TransferFit};
-use super::reconstruct::union_by_transfer;
 use super::relations::{End, JunctionKind, Relations};
 use super::segments::Segment;
+use super::transfer::union_by_transfer;
 use crate::union_find::UnionFind;
 
 /// Tolerances of facet formation.

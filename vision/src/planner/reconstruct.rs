@@ -22,8 +22,9 @@
 use super::facets::Facet;
 use super::geom::{self, P2};
 use super::matching::{Candidates, EpipolarFrame, Friendship, EpipolarGeometry};
-use super::planes::{coverage, stretches_overlap, Plane, Transfer};
+use super::planes::{coverage, stretches_overlap, Plane};
 use super::segments::Segment;
+use super::transfer::union_by_transfer;
 
 /// How a match was reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -225,29 +226,6 @@ pub fn reconstruct(matches: &mut [Match], facets: &[Facet], friends: &[Friendshi
     }
 }
 
-/// Corresponding end points of the union of `l` and `r` under transfer `t`.
-///
-/// Where one view's segment runs on well beyond the other's, the excess is capped (at
-/// `max(4 px, 15%)` of the shorter one): an edge is often truncated differently in the two
-/// views, but a large excess usually means the longer segment continues onto another surface
-/// (two edges that happen to line up in one view).
-pub fn union_by_transfer(t: &Transfer, l: &Segment, r: &Segment) -> ([P2; 2], [P2; 2]) {
-    let ll = l.length();
-    let (mut rlo, mut rhi) = (0.0, ll);
-    if let Some(ti) = t.inverse() {
-        let (a, b) = (l.along(ti.apply(r.p0)), l.along(ti.apply(r.p1)));
-        rlo = a.min(b);
-        rhi = a.max(b);
-    }
-    let cap = (0.15 * ll.min(rhi - rlo)).max(4.0);
-    // Each side: the outer of the two ends, but no more than `cap` beyond the inner one.
-    let lo = 0.0f64.min(rlo).max(0.0f64.max(rlo) - cap);
-    let hi = ll.max(rhi).min(ll.min(rhi) + cap);
-    let d = l.dir();
-    let xl = [geom::add(l.p0, geom::scale(d, lo)), geom::add(l.p0, geom::scale(d, hi))];
-    (xl, [t.apply(xl[0]), t.apply(xl[1])])
-}
-
 /// Corresponding end points of the union of `l` and `r` along the epipolar constraint.
 fn union_by_epipolar(ef: &EpipolarFrame, l: &Segment, r: &Segment) -> Option<([P2; 2], [P2; 2])> {
     let mut pts: Vec<(f64, P2, P2)> = Vec::with_capacity(4);
@@ -282,20 +260,6 @@ mod tests {
 
     fn seg(p0: P2, p1: P2) -> Segment {
         Segment { p0, p1, contrast: 10.0, rms_px: 0.1, n_points: 20 }
-    }
-
-    #[test]
-    fn union_of_truncated_images_under_a_transfer() {
-        let t = Transfer { a: [[1.0, 0.0], [0.0, 1.0]], b: [-10.0, 0.0] };
-        // Left sees x in [100, 150]; the right view (shifted by −10) sees [95, 170]. The 5 px
-        // at the start are within the cap and kept; the 20 px at the end exceed the cap
-        // (15% of the shorter, 7.5 px) and are cut there.
-        let l = seg([100.0, 50.0], [150.0, 50.0]);
-        let r = seg([85.0, 50.0], [160.0, 50.0]);
-        let (xl, xr) = union_by_transfer(&t, &l, &r);
-        assert!(geom::dist(xl[0], [95.0, 50.0]) < 1e-9, "{xl:?}");
-        assert!(geom::dist(xl[1], [157.5, 50.0]) < 1e-9, "{xl:?}");
-        assert!(geom::dist(xr[0], [85.0, 50.0]) < 1e-9 && geom::dist(xr[1], [147.5, 50.0]) < 1e-9);
     }
 
     #[test]

@@ -17,6 +17,7 @@
 
 use super::geom::{self, P2};
 use crate::image::ImageBuf;
+use crate::rng::XorShift64;
 
 /// A float canvas that polygons are painted onto with coverage blending.
 #[derive(Debug, Clone)]
@@ -85,7 +86,7 @@ impl Canvas {
     /// Quantises to GRAY8, adding deterministic zero-mean noise of standard deviation
     /// `noise_sigma` grey levels (seeded).
     pub fn to_image(&self, noise_sigma: f32, seed: u64) -> ImageBuf {
-        let mut rng = XorShift(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+        let mut rng = XorShift64::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
         let data = self
             .data
             .iter()
@@ -95,38 +96,6 @@ impl Canvas {
             })
             .collect();
         ImageBuf { data, width: self.width, height: self.height }
-    }
-}
-
-/// A tiny deterministic generator for test noise and random layouts.
-///
-/// Not the workspace's [`SplitMix64`](crate::rng::SplitMix64): the planner's synthetic
-/// acceptance measures (`tests/planner_synthetic.rs`: found rate over ten seeded layouts,
-/// the bootstrap's recovery) were set on this stream, and on SplitMix64's layouts they do
-/// not hold as they stand (86 % found, or a bootstrap that does not re-match). Moving these
-/// scenes to SplitMix64 means re-baselining those tests, which is a decision of its own.
-#[derive(Debug, Clone)]
-pub struct XorShift(pub u64);
-
-impl XorShift {
-    pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        self.0 = x;
-        x
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Approximately standard normal (sum of four uniforms, rescaled).
-    pub fn gauss(&mut self) -> f32 {
-        let s: f32 = (0..4).map(|_| self.uniform()).sum();
-        (s - 2.0) * (3.0f32).sqrt()
     }
 }
 
@@ -303,7 +272,7 @@ impl SynthScene {
 
     /// `n` boxes of 20-60 mm placed at random without overlap (seeded).
     pub fn random(n: usize, seed: u64) -> Self {
-        let mut rng = XorShift(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1);
+        let mut rng = XorShift64::new(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1);
         let mut boxes: Vec<BoxSpec> = Vec::new();
         let mut tries = 0;
         while boxes.len() < n && tries < 1000 {

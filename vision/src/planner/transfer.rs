@@ -146,6 +146,29 @@ pub fn coverage(t: &Transfer, l: &Segment, r: &Segment) -> (f64, f64) {
     if hi > lo { (lo, hi) } else { (lo, lo) }
 }
 
+/// Corresponding end points of the union of `l` and `r` under transfer `t`.
+///
+/// Where one view's segment runs on well beyond the other's, the excess is capped (at
+/// `max(4 px, 15%)` of the shorter one): an edge is often truncated differently in the two
+/// views, but a large excess usually means the longer segment continues onto another surface
+/// (two edges that happen to line up in one view).
+pub fn union_by_transfer(t: &Transfer, l: &Segment, r: &Segment) -> ([P2; 2], [P2; 2]) {
+    let ll = l.length();
+    let (mut rlo, mut rhi) = (0.0, ll);
+    if let Some(ti) = t.inverse() {
+        let (a, b) = (l.along(ti.apply(r.p0)), l.along(ti.apply(r.p1)));
+        rlo = a.min(b);
+        rhi = a.max(b);
+    }
+    let cap = (0.15 * ll.min(rhi - rlo)).max(4.0);
+    // Each side: the outer of the two ends, but no more than `cap` beyond the inner one.
+    let lo = 0.0f64.min(rlo).max(0.0f64.max(rlo) - cap);
+    let hi = ll.max(rhi).min(ll.min(rhi) + cap);
+    let d = l.dir();
+    let xl = [geom::add(l.p0, geom::scale(d, lo)), geom::add(l.p0, geom::scale(d, hi))];
+    (xl, [t.apply(xl[0]), t.apply(xl[1])])
+}
+
 /// Whether two stretches of a segment overlap by more than a few pixels.
 pub fn stretches_overlap(a: (f64, f64), b: (f64, f64)) -> bool {
     a.1.min(b.1) - a.0.max(b.0) > 3.0
@@ -188,5 +211,23 @@ mod tests {
         for x in [[0.0, 0.0], [300.0, 200.0]] {
             assert!(geom::dist(t.apply(x), truth.apply(x)) < 1e-6);
         }
+    }
+
+    fn segment(p0: P2, p1: P2) -> Segment {
+        Segment { p0, p1, contrast: 10.0, rms_px: 0.1, n_points: 20 }
+    }
+
+    #[test]
+    fn union_of_truncated_images_under_a_transfer() {
+        let t = Transfer { a: [[1.0, 0.0], [0.0, 1.0]], b: [-10.0, 0.0] };
+        // Left sees x in [100, 150]; the right view (shifted by −10) sees [95, 170]. The 5 px
+        // at the start are within the cap and kept; the 20 px at the end exceed the cap
+        // (15% of the shorter, 7.5 px) and are cut there.
+        let l = segment([100.0, 50.0], [150.0, 50.0]);
+        let r = segment([85.0, 50.0], [160.0, 50.0]);
+        let (xl, xr) = union_by_transfer(&t, &l, &r);
+        assert!(geom::dist(xl[0], [95.0, 50.0]) < 1e-9, "{xl:?}");
+        assert!(geom::dist(xl[1], [157.5, 50.0]) < 1e-9, "{xl:?}");
+        assert!(geom::dist(xr[0], [85.0, 50.0]) < 1e-9 && geom::dist(xr[1], [147.5, 50.0]) < 1e-9);
     }
 }

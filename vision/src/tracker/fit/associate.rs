@@ -1,8 +1,8 @@
 //! Association: every point takes the candidate edge the current motion explains best.
 
 use super::buffers::FitBuffers;
-use super::robust::HIST_PER_PX;
-use super::Vec8;
+use super::histogram::HIST_PER_PX;
+use super::types::Vec8;
 use crate::tracker::search::MAX_CANDIDATES;
 use crate::tracker::simd::F32x4;
 

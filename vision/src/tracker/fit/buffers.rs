@@ -1,9 +1,8 @@
 //! The per-point arrays of one fit: what the search writes (positions, normals, candidates)
 //! and the fit's f32 working copies, laid out for four- and eight-lane loops.
 
-use super::associate::associate;
-use super::robust::{weigh, ResidualBins};
-use super::{RobustLoss, Vec8, LANES};
+use super::histogram::ResidualBins;
+use super::types::{RobustLoss, Vec8, LANES};
 use crate::cpu::has_avx2;
 use crate::tracker::search::{Candidate, MAX_CANDIDATES};
 
@@ -167,7 +166,7 @@ impl FitBuffers {
     /// Fills the working copies from a pass's points (the tracker sets them as it searches
     /// instead).
     #[cfg(test)]
-    pub(super) fn load(&mut self, points: &super::FitPoints<'_>, edges: &[crate::tracker::search::PointEdges]) {
+    pub(super) fn load(&mut self, points: &super::types::FitPoints<'_>, edges: &[crate::tracker::search::PointEdges]) {
         self.resize(points.px.len());
         for side in points.sides {
             for i in side.first..side.first + side.count {
@@ -177,21 +176,6 @@ impl FitBuffers {
         }
         for (i, e) in edges.iter().enumerate() {
             self.set_candidates(i, e.as_slice());
-        }
-    }
-
-    /// The per-point results of the last fit: every point's chosen candidate, residual and
-    /// weight against the final motion. Does nothing before a fit or when already done.
-    pub fn finish(&mut self) {
-        let Some((theta, sigma, loss)) = self.last.take() else {
-            return;
-        };
-        associate::<false, true>(&theta, self);
-        weigh(loss, sigma, self);
-        for i in 0..self.n {
-            self.chosen[i] = self.chosen_lane[i] as i8;
-            self.residual[i] = self.r[i] as f64;
-            self.weight[i] = self.w[i] as f64;
         }
     }
 }

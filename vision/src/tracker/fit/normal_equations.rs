@@ -1,7 +1,7 @@
 //! The normal equations from nine weighted moments per straight side.
 
 use super::buffers::FitBuffers;
-use super::{FitSide, Mat8, Vec8};
+use super::types::{FitSide, Mat8, Vec8};
 use crate::tracker::simd::F32x4;
 
 /// Positions of a side's coefficient vector `u = (n.x, n.y, −c)` in `θ` for the `p.x` and the

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix2, Vector2};
 
 use super::buffers::FitBuffers;
-use super::{FitPoints, Mat8, Vec8};
+use super::types::{FitPoints, Mat8, Vec8};
 
 /// A.1: `M_tt t = b_t − M_ts s` with the shape `s` of `theta` held.
 ///
