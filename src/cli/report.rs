@@ -202,7 +202,11 @@ mod tests {
     /// A report read across a process boundary refuses a renamed field with an error that
     /// names it and the file, never reading it as `null`.
     fn renamed_field_fails<T: DeserializeOwned + std::fmt::Debug>(text: &str, field: &str) {
-        let path = std::env::temp_dir().join(format!("handeye-report-test-{}-{field}.json", std::process::id()));
+        // Tests run in parallel and may rename the same field of different reports: one file
+        // per call.
+        static CALLS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path = std::env::temp_dir().join(format!("handeye-report-test-{}-{call}-{field}.json", std::process::id()));
         std::fs::write(&path, rename(text, field, &format!("{field}_renamed"))).unwrap();
         let err = format!("{:#}", read_report::<T>(&path).unwrap_err());
         let _ = std::fs::remove_file(&path);
