@@ -17,7 +17,7 @@ use super::pairing::{DropReason, Paired, Pairer, Stamped};
 use super::pipeline::{full_description, Side};
 use super::source::{CapturedFrame, Source, SourceEvent};
 use super::summary::{CameraStats, ReportedEnd};
-use super::{CameraArgs, DeliveryMode};
+use super::args::{CameraArgs, DeliveryMode};
 
 /// Left or right frames that may wait for a partner; a side that runs further ahead is held
 /// back (lossless) or loses its oldest frame (live).
