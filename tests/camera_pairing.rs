@@ -37,6 +37,9 @@ fn two_rates_publish_only_pairs_within_the_skew_and_count_the_rest() {
         "--json",
         "--progress-s",
         "0",
+        // Not about stalls: a loaded machine must not make one.
+        "--stall-timeout-s",
+        "5",
     ]);
     let camera = Proc::spawn("camera", cam_cmd);
     let (cam_ok, cam_out, cam_err) = camera.finish(Duration::from_secs(60));

@@ -23,9 +23,10 @@ like a camera (a lagging subscriber loses its oldest frame). `auto` (default): l
 source is live.
 
 A source that fails or ends is reported by name with GStreamer's text (\"left source: ...\") as
-soon as GStreamer posts it; the command then exits with status 1, or with --reconnect rebuilds
-that source's pipeline and goes on. A file that ends with --count 0 is the end of the run (status
-0). Progress goes to stderr once a second; the summary to stdout at the end.
+soon as GStreamer posts it, and a live source that stops delivering after --stall-timeout-s; the
+command then exits with status 1, or with --reconnect rebuilds that source's pipeline and goes
+on. A file that ends with --count 0 is the end of the run (status 0). Progress goes to stderr
+once a second; the summary to stdout at the end.
 
 Examples:
   # two USB cameras (see README.md, \"Real cameras\")
@@ -43,10 +44,11 @@ Examples:
 JSON keys: frames (published), first_frame_id, last_frame_id, left_frames, right_frames (that
 reached handeye), dropped (ids skipped = dropped_skew + dropped_stale + dropped_busy_left +
 dropped_publish), dropped_busy_right, right_unpaired, arrival_stamped (no buffer timestamp:
-stamped on arrival), unreadable, reconnects, pending_left, pending_right (waiting for a partner at the end),
-next_frame_id (= frames + dropped), fps, skew_ns_p50/p99/max, latency_ns_p50/p99/max
-(capture stamp to publish), delivery, left_live, right_live, source_ends [{side, kind (error or
-eos), message, posted_ns, reported_ns, detection_ns}], completed (--count reached), duration_s.";
+stamped on arrival), unreadable, reconnects, pending_left, pending_right (waiting for a partner
+at the end), next_frame_id (= frames + dropped), fps, skew_ns_p50/p99/max,
+latency_ns_p50/p99/max (capture stamp to publish; percentiles over the newest million frames at
+least), delivery, left_live, right_live, source_ends [{side, kind (error, eos or stalled), message,
+posted_ns, reported_ns, detection_ns}], completed (--count reached), duration_s.";
 
 /// How frames are handed to the subscribers.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -106,6 +108,13 @@ pub struct CameraArgs {
     /// instead of exiting. Frame ids keep counting up.
     #[arg(long)]
     pub reconnect: bool,
+
+    /// A live source that delivers no frame for this many seconds (after its first frame;
+    /// 5 s for the first) has stalled: reported and handled like a failed source. Catches a
+    /// camera or network source that hangs without an error. Raise it for sources slower
+    /// than about 4 frames/s. 0 = never.
+    #[arg(long, default_value_t = 0.5, value_name = "S", value_parser = parse_seconds)]
+    pub stall_timeout_s: f64,
 
     /// Seconds between attempts to rebuild a failed source (with --reconnect).
     #[arg(long, default_value_t = 1.0, value_name = "S", value_parser = parse_seconds)]

@@ -9,28 +9,28 @@ use anyhow::{anyhow, bail, Context, Result};
 use crossbeam::channel::Select;
 use gstreamer as gst;
 use gstreamer::prelude::*;
-use handeye_wire::stereo::{Delivery, PublishError, StereoFormat, StereoPublisher, StereoPublisherOptions};
+use handeye_wire::stereo::{PublishError, StereoPublisher};
 use handeye_wire::{monotonic_ns, WireNode};
 
-use super::clock::{monotonic_clock, Stamp};
+use super::clock::Stamp;
 use super::pairing::{DropReason, Paired, Pairer, Stamped};
-use super::pipeline::{full_description, Side};
-use super::source::{CapturedFrame, Source, SourceEvent};
-use super::summary::{CameraStats, ReportedEnd};
-use super::args::{CameraArgs, DeliveryMode};
+use super::pipeline::Side;
+use super::source::{CapturedFrame, Source, SourceEnd, SourceEvent};
+use super::summary::{record, CameraStats, ReportedEnd};
+use super::args::CameraArgs;
 
 /// Left or right frames that may wait for a partner; a side that runs further ahead is held
 /// back (lossless) or loses its oldest frame (live).
-const MAX_WAITING: usize = 8;
+pub(super) const MAX_WAITING: usize = 8;
 
 /// One side's source: running, or waiting to be rebuilt (--reconnect).
-enum Slot {
+pub(super) enum Slot {
     Running(Source),
     Retrying { at: Instant, attempt: u32 },
 }
 
 impl Slot {
-    fn source(&self) -> Option<&Source> {
+    pub(super) fn source(&self) -> Option<&Source> {
         match self {
             Slot::Running(s) => Some(s),
             Slot::Retrying { .. } => None,
@@ -39,7 +39,7 @@ impl Slot {
 }
 
 /// How the run ended.
-enum End {
+pub(super) enum End {
     Completed,
     Interrupted,
     /// A file source ended with --count 0: the natural end.
@@ -47,130 +47,37 @@ enum End {
     SourceFailed(String),
 }
 
-struct Capture<'a> {
-    args: &'a CameraArgs,
-    clock: gst::Clock,
-    descriptions: [Option<String>; 2],
-    slots: [Option<Slot>; 2],
-    pairer: Pairer<CapturedFrame>,
-    publisher: StereoPublisher,
-    node: WireNode,
-    lossless: bool,
-    stats: CameraStats,
+pub(super) struct Capture<'a> {
+    pub(super) args: &'a CameraArgs,
+    pub(super) clock: gst::Clock,
+    pub(super) descriptions: [Option<String>; 2],
+    pub(super) slots: [Option<Slot>; 2],
+    pub(super) pairer: Pairer<CapturedFrame>,
+    pub(super) publisher: StereoPublisher,
+    pub(super) node: WireNode,
+    pub(super) lossless: bool,
+    pub(super) stats: CameraStats,
     /// Busy drops already accounted for, per side.
-    busy_seen: [u64; 2],
+    pub(super) busy_seen: [u64; 2],
     /// Whether each side's source was live when last started.
-    live: [Option<bool>; 2],
+    pub(super) live: [Option<bool>; 2],
+    /// CLOCK_MONOTONIC ns when each side last started playing, and of its last frame: a live
+    /// source silent for longer than --stall-timeout-s has stalled.
+    pub(super) playing_since_ns: [u64; 2],
+    pub(super) last_frame_ns: [Option<u64>; 2],
 }
 
-fn index(side: Side) -> usize {
+/// A live source may take this long to deliver its first frame (cameras negotiate, focus).
+const FIRST_FRAME_TIMEOUT_NS: u64 = 5_000_000_000;
+
+pub(super) fn index(side: Side) -> usize {
     match side {
         Side::Left => 0,
         Side::Right => 1,
     }
 }
 
-const SIDES: [Side; 2] = [Side::Left, Side::Right];
-
-pub fn run(args: &CameraArgs) -> Result<()> {
-    gst::init().context("cannot initialise GStreamer (scripts/setup.sh installs it)")?;
-    let clock = monotonic_clock();
-    let (w, h) = (args.width_px, args.height_px);
-    let descriptions = [
-        Some(full_description(Side::Left, &args.left, w, h)?),
-        match (&args.right, args.mono) {
-            (Some(r), false) => Some(full_description(Side::Right, r, w, h)?),
-            _ => None,
-        },
-    ];
-    let retry_at = || Instant::now() + Duration::from_secs_f64(args.reconnect_delay_s);
-    let mut slots: [Option<Slot>; 2] = [None, None];
-    for side in SIDES {
-        if let Some(d) = &descriptions[index(side)] {
-            slots[index(side)] = Some(match Source::prepare(side, d, &clock) {
-                Ok(s) => Slot::Running(s),
-                Err(e) if args.reconnect => {
-                    eprintln!("camera: {side} source: {e:#}; retrying in {:.1} s (attempt 1)", args.reconnect_delay_s);
-                    Slot::Retrying { at: retry_at(), attempt: 1 }
-                }
-                Err(e) => bail!("{side} source: {e:#}"),
-            });
-        }
-    }
-    let live = [0, 1].map(|i| slots[i].as_ref().and_then(Slot::source).map(|s| s.live));
-    let any_live = live.contains(&Some(true));
-    let lossless = match args.delivery {
-        DeliveryMode::Auto => !any_live && live.iter().any(Option::is_some),
-        DeliveryMode::Latest => false,
-        DeliveryMode::Lossless if any_live => {
-            bail!("--delivery lossless: a live source (a camera) cannot wait for the subscribers; use latest or auto")
-        }
-        DeliveryMode::Lossless => true,
-    };
-    for s in slots.iter().flatten().filter_map(Slot::source) {
-        s.set_lossless(lossless);
-    }
-
-    let domain = &args.domain.domain;
-    let node = WireNode::create(domain, "handeye-camera")?;
-    let wait = Duration::from_secs_f64(args.wait_subscriber_s);
-    let delivery = if lossless {
-        Delivery::Lossless { in_flight: 1, timeout: if wait.is_zero() { Duration::from_secs(30) } else { wait } }
-    } else {
-        Delivery::Latest
-    };
-    let publisher = StereoPublisher::create(&node, StereoFormat::gray8_pair(w, h), StereoPublisherOptions { delivery, ..Default::default() })?;
-    let live_text = |i: usize| match live[i] {
-        Some(true) => "live",
-        Some(false) => "not live",
-        None => "not started",
-    };
-    eprintln!(
-        "camera: {} {w}x{h} GRAY8 on handeye/stereo, domain '{domain}', {} delivery; left {}{}",
-        if args.mono { "mono (left as both views)" } else { "stereo" },
-        if lossless { "lossless" } else { "latest" },
-        live_text(0),
-        if args.mono { String::new() } else { format!(", right {}", live_text(1)) }
-    );
-    let mut capture = Capture {
-        args,
-        clock,
-        descriptions,
-        slots,
-        pairer: Pairer::new((args.max_skew_ms * 1e6).round() as u64, MAX_WAITING),
-        publisher,
-        node,
-        lossless,
-        stats: CameraStats::default(),
-        busy_seen: [0, 0],
-        live,
-    };
-    let start = Instant::now();
-    // The sources play once someone listens: no frame is captured only to be thrown away.
-    let end = if !wait.is_zero() && !capture.wait_for_subscriber(wait)? {
-        End::Interrupted
-    } else {
-        capture.play_all()?;
-        capture.run_loop()?
-    };
-    capture.finish(&end)?;
-    let completed = matches!(end, End::Completed);
-    let duration_s = start.elapsed().as_secs_f64();
-    // Stop the pipelines before reporting; the publisher goes last, and subscribers see it gone.
-    capture.slots = [None, None];
-    let live_pair = (capture.live[0].unwrap_or(false), (!args.mono).then(|| capture.live[1].unwrap_or(false)));
-    if args.json {
-        let delivery = if capture.lossless { "lossless" } else { "latest" };
-        println!("{}", capture.stats.json(delivery, live_pair, completed, duration_s));
-    } else {
-        print!("{}", capture.stats.text(args.mono, completed, duration_s));
-    }
-    drop(capture);
-    match end {
-        End::SourceFailed(why) => Err(anyhow!(why)),
-        End::Completed | End::Interrupted | End::SourceDone => Ok(()),
-    }
-}
+pub(super) const SIDES: [Side; 2] = [Side::Left, Side::Right];
 
 impl Capture<'_> {
     fn source(&self, side: Side) -> Option<&Source> {
@@ -178,8 +85,9 @@ impl Capture<'_> {
     }
 
     /// Plays every prepared source on one base time (see `Source::play`).
-    fn play_all(&mut self) -> Result<()> {
+    pub(super) fn play_all(&mut self) -> Result<()> {
         let base_time = self.clock.time();
+        self.playing_since_ns = [monotonic_ns(); 2];
         for side in SIDES {
             let slot = &mut self.slots[index(side)];
             if matches!(slot, Some(Slot::Running(_)))
@@ -198,7 +106,7 @@ impl Capture<'_> {
         Ok(())
     }
 
-    fn run_loop(&mut self) -> Result<End> {
+    pub(super) fn run_loop(&mut self) -> Result<End> {
         let start = Instant::now();
         let progress_every = (self.args.progress_s > 0.0).then(|| Duration::from_secs_f64(self.args.progress_s));
         let mut next_progress = progress_every.map(|p| start + p);
@@ -229,6 +137,9 @@ impl Capture<'_> {
             if let Some(end) = self.retry_sources()? {
                 return Ok(end);
             }
+            if let Some(end) = self.check_stalls()? {
+                return Ok(end);
+            }
             self.account_busy_drops();
 
             // Wait for a frame or an end, at most until the next retry or progress line.
@@ -239,6 +150,11 @@ impl Capture<'_> {
             for slot in self.slots.iter().flatten() {
                 if let Slot::Retrying { at, .. } = slot {
                     deadline = deadline.min(*at);
+                }
+            }
+            for side in SIDES {
+                if let Some(stall_ns) = self.stall_deadline_ns(side) {
+                    deadline = deadline.min(now + Duration::from_nanos(stall_ns.saturating_sub(monotonic_ns())));
                 }
             }
             let mut sel = Select::new();
@@ -292,7 +208,7 @@ impl Capture<'_> {
     }
 
     /// Waits for a subscriber, saying so. `Ok(false)` when interrupted; an error on time-out.
-    fn wait_for_subscriber(&self, wait: Duration) -> Result<bool> {
+    pub(super) fn wait_for_subscriber(&self, wait: Duration) -> Result<bool> {
         if self.publisher.subscriber_count() > 0 {
             return Ok(true);
         }
@@ -330,6 +246,8 @@ impl Capture<'_> {
                 Ok(source) => {
                     eprintln!("camera: {side} source: running again (attempt {attempt})");
                     self.live[i] = Some(source.live);
+                    self.playing_since_ns[i] = monotonic_ns();
+                    self.last_frame_ns[i] = None;
                     self.busy_seen[i] = 0;
                     self.stats.reconnects += 1;
                     self.slots[i] = Some(Slot::Running(source));
@@ -344,6 +262,37 @@ impl Capture<'_> {
         Ok(None)
     }
 
+    /// When `side`'s source will count as stalled if no frame comes (live sources only).
+    fn stall_deadline_ns(&self, side: Side) -> Option<u64> {
+        let stall_ns = (self.args.stall_timeout_s * 1e9) as u64;
+        if stall_ns == 0 || !self.source(side)?.live {
+            return None;
+        }
+        let i = index(side);
+        Some(match self.last_frame_ns[i] {
+            Some(t) => t + stall_ns,
+            None => self.playing_since_ns[i] + stall_ns.max(FIRST_FRAME_TIMEOUT_NS),
+        })
+    }
+
+    /// A live source that went silent is handled like one that failed.
+    fn check_stalls(&mut self) -> Result<Option<End>> {
+        for side in SIDES {
+            let Some(deadline_ns) = self.stall_deadline_ns(side) else { continue };
+            let now_ns = monotonic_ns();
+            if now_ns < deadline_ns {
+                continue;
+            }
+            let since_ns = self.last_frame_ns[index(side)].unwrap_or(self.playing_since_ns[index(side)]);
+            let silent_s = now_ns.saturating_sub(since_ns) as f64 / 1e9;
+            let event = SourceEvent { end: SourceEnd::Stalled { silent_s }, posted_ns: deadline_ns };
+            if let Some(end) = self.on_source_end(side, event)? {
+                return Ok(Some(end));
+            }
+        }
+        Ok(None)
+    }
+
     /// A source ended: take the frames it delivered before, report it, and decide.
     fn on_source_end(&mut self, side: Side, event: SourceEvent) -> Result<Option<End>> {
         while let Some(frame) = self.source(side).and_then(Source::try_frame) {
@@ -352,7 +301,7 @@ impl Capture<'_> {
         let reported = ReportedEnd { side, event, reported_ns: monotonic_ns() };
         let message = format!("{side} source: {}", reported.event.end);
         eprintln!("camera: {message} (reported {:.1} ms after GStreamer posted it)", reported.detection_ns() as f64 / 1e6);
-        let eos = matches!(reported.event.end, super::source::SourceEnd::Eos);
+        let eos = matches!(reported.event.end, SourceEnd::Eos);
         self.stats.ends.push(reported);
         if self.args.count > 0 && self.stats.published >= self.args.count {
             return Ok(Some(End::Completed));
@@ -386,6 +335,7 @@ impl Capture<'_> {
     }
 
     fn on_frame(&mut self, side: Side, frame: CapturedFrame) -> Result<()> {
+        self.last_frame_ns[index(side)] = Some(monotonic_ns());
         if frame.stamp == Stamp::Arrival {
             self.stats.arrival_stamped += 1;
         }
@@ -442,9 +392,9 @@ impl Capture<'_> {
                 s.last_frame_id = Some(id);
                 s.first_publish_ns.get_or_insert(publish_ns);
                 s.last_publish_ns = Some(publish_ns);
-                s.latencies_ns.push(publish_ns.saturating_sub(left.capture_ns));
+                record(&mut s.latencies_ns, publish_ns.saturating_sub(left.capture_ns));
                 if let Some(k) = skew_ns {
-                    s.skews_ns.push(k);
+                    record(&mut s.skews_ns, k);
                 }
                 Ok(())
             }
@@ -460,7 +410,7 @@ impl Capture<'_> {
     }
 
     /// Lets the subscribers take the last frames before the publisher goes away.
-    fn finish(&mut self, end: &End) -> Result<()> {
+    pub(super) fn finish(&mut self, end: &End) -> Result<()> {
         for side in SIDES {
             if let Some(src) = self.source(side) {
                 self.stats.unreadable += src.unreadable();

@@ -56,6 +56,9 @@ pub enum SourceEnd {
     Error { message: String, detail: String },
     /// The end of the stream (a file's end, `num-buffers` reached, a camera closed).
     Eos,
+    /// A live source delivered no frame for this long, and GStreamer said nothing: a camera
+    /// or network source that hangs or was killed without closing its stream.
+    Stalled { silent_s: f64 },
 }
 
 impl std::fmt::Display for SourceEnd {
@@ -64,6 +67,7 @@ impl std::fmt::Display for SourceEnd {
             SourceEnd::Error { message, detail } if detail.is_empty() => write!(f, "{message}"),
             SourceEnd::Error { message, detail } => write!(f, "{message} ({detail})"),
             SourceEnd::Eos => write!(f, "ended (end of stream)"),
+            SourceEnd::Stalled { silent_s } => write!(f, "stalled: no frame for {silent_s:.2} s (--stall-timeout-s)"),
         }
     }
 }

@@ -3,7 +3,7 @@
 use serde_json::{json, Value};
 
 use super::pipeline::Side;
-use super::source::SourceEvent;
+use super::source::{SourceEnd, SourceEvent};
 
 /// A source's end as the command reported it.
 pub struct ReportedEnd {
@@ -61,6 +61,19 @@ pub struct CameraStats {
     pub last_publish_ns: Option<u64>,
 }
 
+/// Latencies and skews kept for the percentiles: the newest 2^20 at least (about 10 hours at
+/// 30 frames/s); beyond that the older half is forgotten, so a camera left running for days
+/// keeps a bounded memory.
+const KEPT_SAMPLES: usize = 1 << 21;
+
+/// Appends `value`, forgetting the older half of `values` when it is full.
+pub fn record(values: &mut Vec<u64>, value: u64) {
+    if values.len() >= KEPT_SAMPLES {
+        values.drain(..KEPT_SAMPLES / 2);
+    }
+    values.push(value);
+}
+
 /// Nearest-rank percentile of unsorted values (sorted on a copy).
 pub fn percentile(values: &[u64], p: f64) -> Option<u64> {
     if values.is_empty() {
@@ -116,7 +129,11 @@ impl CameraStats {
             .map(|e| {
                 json!({
                     "side": e.side.to_string(),
-                    "kind": match e.event.end { super::source::SourceEnd::Eos => "eos", _ => "error" },
+                    "kind": match e.event.end {
+                        SourceEnd::Eos => "eos",
+                        SourceEnd::Error { .. } => "error",
+                        SourceEnd::Stalled { .. } => "stalled",
+                    },
                     "message": e.event.end.to_string(),
                     "posted_ns": e.event.posted_ns,
                     "reported_ns": e.reported_ns,
