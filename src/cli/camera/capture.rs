@@ -123,12 +123,12 @@ impl Capture<'_> {
                 eprintln!("{}", self.stats.progress_line(self.args.mono));
                 next_progress = progress_every.map(|p| (t + p).max(now));
             }
-            if self.lossless && now >= next_subscriber_check {
+            if self.lossless && self.args.wait_subscriber_s > 0.0 && now >= next_subscriber_check {
                 // Frames sent while no one listens would be lost: wait for a subscriber.
                 next_subscriber_check = now + Duration::from_millis(250);
                 if self.publisher.subscriber_count() == 0 {
                     eprintln!("camera: no subscriber left after {} frames", self.stats.published);
-                    let wait = Duration::from_secs_f64(self.args.wait_subscriber_s.max(1.0));
+                    let wait = Duration::from_secs_f64(self.args.wait_subscriber_s);
                     if !self.wait_for_subscriber(wait)? {
                         return Ok(End::Interrupted);
                     }
