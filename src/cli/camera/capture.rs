@@ -16,8 +16,8 @@ use super::clock::Stamp;
 use super::pairing::{DropReason, Paired, Pairer, Stamped};
 use super::pipeline::Side;
 use super::source::{CapturedFrame, Source, SourceEnd, SourceEvent};
-use super::summary::{record, CameraStats, ReportedEnd};
 use super::args::CameraArgs;
+use super::summary::{record, CameraStats, ReportedEnd};
 
 /// Left or right frames that may wait for a partner; a side that runs further ahead is held
 /// back (lossless) or loses its oldest frame (live).
@@ -47,6 +47,8 @@ pub(super) enum End {
     SourceFailed(String),
 }
 
+/// One run of `handeye camera`: its sources, the pairer, the publisher and the counts. Built
+/// by `start`, driven by [`Capture::run_loop`].
 pub(super) struct Capture<'a> {
     pub(super) args: &'a CameraArgs,
     pub(super) clock: gst::Clock,
