@@ -10,7 +10,8 @@ SKIPPED_LOG := $(CURDIR)/target/skipped-tests.log
 
 all: build
 
-# Installs the system packages that are missing (software Vulkan on GPU-less machines).
+# Installs the system packages that are missing (software Vulkan on GPU-less machines,
+# GStreamer for `handeye camera`).
 setup:
 	bash scripts/setup.sh
 

@@ -1,11 +1,19 @@
 #!/usr/bin/env bash
-# Installs the system packages handeye needs at run time, and only those that are missing.
+# Installs the system packages handeye needs to build and run, and only those that are missing.
 # Safe to run repeatedly; needs root (or sudo) only when something is actually missing.
 #
 #   mesa-vulkan-drivers + libvulkan1  software Vulkan (lavapipe) for the simulator's renderer
 #                                     on machines without a GPU; skipped when a Vulkan ICD exists.
 #   gcc + libc6-dev                   the C linker Rust links with; only if `cc` is missing
 #                                     (a bare rustup install does not bring one).
+#   pkg-config                        how the gstreamer crates find the GStreamer libraries.
+#   libgstreamer1.0-dev +             GStreamer's headers and .pc files, to build `handeye camera`
+#   libgstreamer-plugins-base1.0-dev  (the default cargo feature `camera`; appsink, video).
+#   gstreamer1.0-plugins-base         videoconvert, videoscale, videotestsrc, decodebin: what
+#                                     every `handeye camera` pipeline ends with, and test sources.
+#   gstreamer1.0-plugins-good         v4l2src (USB cameras), mp4 (de)muxing, pngdec, multifilesrc.
+#   gstreamer1.0-plugins-ugly         x264enc: the tests make an H.264 video from real frames.
+#   gstreamer1.0-libav                avdec_h264: decoding H.264 files and cameras.
 #
 # iceoryx2 needs nothing but a writable /dev/shm (and /tmp); rapier, nalgebra and glam need
 # nothing.
@@ -21,13 +29,19 @@ if ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; then loader=true; fi
 $loader || need+=(libvulkan1)
 $have_icd || need+=(mesa-vulkan-drivers)
 command -v cc >/dev/null 2>&1 || need+=(gcc libc6-dev)
+# Debian packages by name: installed ones are skipped.
+have_deb() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'ok installed'; }
+for p in pkg-config libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev gstreamer1.0-plugins-base \
+         gstreamer1.0-plugins-good gstreamer1.0-plugins-ugly gstreamer1.0-libav; do
+    have_deb "$p" || need+=("$p")
+done
 
 if [ ! -w /dev/shm ]; then
     echo "setup: warning: /dev/shm is missing or not writable; handeye's shared memory needs it" >&2
 fi
 
 if [ ${#need[@]} -eq 0 ]; then
-    echo "setup: system packages present (Vulkan loader and ICD, C linker)"
+    echo "setup: system packages present (Vulkan loader and ICD, C linker, GStreamer and its plugins)"
     exit 0
 fi
 

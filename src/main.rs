@@ -27,6 +27,9 @@ struct Cli {
 enum Command {
     /// Publish stereo frames from image files on `handeye/stereo`.
     Feed(cli::feed::FeedArgs),
+    // Its help comes from `CameraArgs`'s doc comment.
+    #[cfg(feature = "camera")]
+    Camera(cli::camera::CameraArgs),
     /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency.
     Monitor(cli::monitor::MonitorArgs),
     /// Track one polygon through an image sequence with the affine contour tracker.
@@ -52,6 +55,8 @@ fn main() -> Result<()> {
     init_logging(&cli.log);
     match cli.command {
         Command::Feed(args) => cli::feed::run(args),
+        #[cfg(feature = "camera")]
+        Command::Camera(args) => cli::camera::run(args),
         Command::Monitor(args) => cli::monitor::run(args),
         Command::Track(args) => cli::track::run(args),
         Command::Sim(args) => cli::sim::run(args),

@@ -2,6 +2,8 @@
 
 pub mod batch;
 pub mod bench;
+#[cfg(feature = "camera")]
+pub mod camera;
 pub mod daemon;
 pub mod domain;
 pub mod feed;

@@ -194,6 +194,13 @@ impl StereoPublisher {
         self.next_frame_id
     }
 
+    /// Counts one frame that this publisher captured but did not send (a camera pair dropped
+    /// for skew, say): the next frame id skips it, and the gap tells every subscriber (and the
+    /// daemon, which reads a gap in the ids as a dropped frame) that a frame is missing.
+    pub fn skip_frame_id(&mut self) {
+        self.next_frame_id += 1;
+    }
+
     /// Number of subscribers connected now (dead ones removed first).
     pub fn subscriber_count(&self) -> usize {
         self.service.try_cleanup_dead_nodes();
