@@ -27,8 +27,11 @@ struct Cli {
 enum Command {
     /// Publish stereo frames from image files on `handeye/stereo`.
     Feed(cli::feed::FeedArgs),
-    /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency.
+    /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency (or, with
+    /// --telemetry, show the daemon's telemetry live).
     Monitor(cli::monitor::MonitorArgs),
+    /// Record the stereo stream, robot state and telemetry into a folder `feed` replays.
+    Record(cli::record::RecordArgs),
     /// Track one polygon through an image sequence with the affine contour tracker.
     Track(cli::track::TrackArgs),
     /// Run the simulator: physics, stereo rendering, robot controller, over shared memory.
@@ -53,6 +56,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Feed(args) => cli::feed::run(args),
         Command::Monitor(args) => cli::monitor::run(args),
+        Command::Record(args) => cli::record::run(args),
         Command::Track(args) => cli::track::run(args),
         Command::Sim(args) => cli::sim::run(args),
         Command::Snapshot(args) => cli::snapshot::run(args),
