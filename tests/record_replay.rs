@@ -32,10 +32,10 @@ fn timing(lines: &[Value]) -> Vec<(u64, u64)> {
     lines.iter().map(|l| (u(l, "id"), u(l, "capture_time_ns") - t0)).collect()
 }
 
-/// Starts `handeye record --out DIR` in `domain` and waits until it listens.
-fn start_recorder(domain: &TestDomain, out: &Path) -> Proc {
+/// Starts `handeye record --out DIR [extra]` in `domain` and waits until it listens.
+fn start_recorder(domain: &TestDomain, out: &Path, extra: &[&str]) -> Proc {
     let mut cmd = handeye(domain);
-    cmd.args(["record", "--json", "--timeout-s", "120", "--progress-s", "0", "--out"]).arg(out);
+    cmd.args(["record", "--json", "--timeout-s", "120", "--progress-s", "0"]).args(extra).arg("--out").arg(out);
     let mut rec = Proc::spawn("record", cmd);
     rec.wait_line("record: listening", Duration::from_secs(30));
     rec
@@ -68,9 +68,9 @@ fn assert_accounted(summary: &Value, lines: &[Value]) {
 }
 
 /// Replays recording `from` with `feed --dir` at `rate` into a fresh recording `to`.
-fn replay(from: &Path, to: &Path, rate: &str, stem: &str) -> Value {
+fn replay(from: &Path, to: &Path, rate: &str, stem: &str, record_extra: &[&str]) -> Value {
     let domain = TestDomain::new(stem);
-    let rec = start_recorder(&domain, to);
+    let rec = start_recorder(&domain, to, record_extra);
     let mut cmd = handeye(&domain);
     cmd.args(["feed", "--rate-hz", rate, "--dir"]).arg(from);
     let (ok, _, stderr) = Proc::spawn("feed", cmd).finish(Duration::from_secs(120));
@@ -88,7 +88,7 @@ fn a_recorded_simulator_run_replays_to_the_same_pixels_and_timing() {
     // 1. A lockstep simulator with no daemon attached steps on by itself: the recorder is
     //    all it needs besides itself.
     let domain = TestDomain::new("record-sim");
-    let rec = start_recorder(&domain, &r1);
+    let rec = start_recorder(&domain, &r1, &[]);
     let mut sim = handeye(&domain);
     sim.args(["sim", scenario.to_str().unwrap(), "--lockstep", "--json", "--frames", &SIM_FRAMES.to_string()]);
     let (ok, sim_out, sim_err) = Proc::spawn("sim", sim).finish(Duration::from_secs(180));
@@ -116,8 +116,10 @@ fn a_recorded_simulator_run_replays_to_the_same_pixels_and_timing() {
         eprintln!("the recorder kept {} of {SIM_FRAMES} frames under this load: {s1}", l1.len());
     }
 
-    // 2. Lossless replay, recorded again: the same frames, pixels, ids, gaps and timing.
-    let s2 = replay(&r1, &r2, "0", "record-replay0");
+    // 2. Lossless replay, recorded again: the same frames, pixels, ids, gaps and timing. A
+    //    writer queue of two frames: the lossless feed must wait for the PNG writer, not
+    //    lose frames to it.
+    let s2 = replay(&r1, &r2, "0", "record-replay0", &["--buffer-frames", "2"]);
     let l2 = lines(&r2);
     assert_eq!(u(&s2, "not_kept"), 0, "{s2}");
     assert_eq!(timing(&l2), timing(&l1), "ids and capture-time differences");
@@ -128,7 +130,7 @@ fn a_recorded_simulator_run_replays_to_the_same_pixels_and_timing() {
 
     // 3. Replay at the recorded timing (a camera: a lagging subscriber may lose frames, which
     //    it counts): every frame that arrives has its recorded id and capture-time offset.
-    let s3 = replay(&r2, &r3, "recorded", "record-replay-timed");
+    let s3 = replay(&r2, &r3, "recorded", "record-replay-timed", &[]);
     let l3 = lines(&r3);
     assert_accounted(&s3, &l3);
     let recorded: std::collections::HashMap<u64, u64> = timing(&l1).into_iter().collect();

@@ -4,7 +4,10 @@
 //!
 //! The subscriber loop only copies each frame out of shared memory (releasing the slot at
 //! once) into one of a bounded set of buffers and hands it to the writer thread (`writer`),
-//! which encodes the PNGs; messages are written by threads of their own (`messages`). So the
+//! which encodes the PNGs; messages are written by threads of their own (`messages`). When
+//! every buffer waits for the writer, the loop holds the frame up to [`WRITER_WAIT`] for one
+//! to come free: a lossless publisher (`feed --rate-hz 0`) then simply waits for the writer,
+//! and a camera's frames overflow the subscriber queue meanwhile (counted as missed). So the
 //! recorder loses nothing it could keep, and what it could not keep is counted, by reason.
 
 mod messages;
@@ -33,8 +36,8 @@ digits), frames.jsonl (one line per kept frame: id, capture_time_ns, publish_tim
 receive_time_ns, left, right, missed_before = ids that never arrived since the previous line,
 not_kept_before = frames that arrived but could not be kept), robot_state.jsonl and
 telemetry.jsonl (one line per message, when any arrive), and at the end recording.json:
-frames, received, missed, not_kept by reason (writer_behind: more than --buffer-frames frames
-waited for the writer; size_changed; write_failed), rejected, robot_states, telemetry,
+frames, received, missed, not_kept by reason (writer_behind: --buffer-frames frames waited for
+the writer for 2 s more; size_changed; write_failed), rejected, robot_states, telemetry,
 first/last frame id, width, height, cameras, checksum (as `handeye monitor --checksum` over
 the kept frames), ended_by, error, duration_s.
 
@@ -74,7 +77,8 @@ pub struct RecordArgs {
     pub timeout_s: f64,
 
     /// Frames that may wait for the PNG writer (each holds one copy of the pixels: 64 x a
-    /// 640x480 pair = 39 MB). A frame arriving when all wait is not kept (counted).
+    /// 640x480 pair = 39 MB). When all wait, the next frame is held (up to 2 s) until one
+    /// is written: a lossless feed waits, a camera's frames overflow (counted as missed).
     #[arg(long, default_value_t = 64, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub buffer_frames: u32,
 
@@ -89,6 +93,10 @@ pub struct RecordArgs {
     #[command(flatten)]
     pub domain: DomainArgs,
 }
+
+/// How long a frame is held waiting for the writer to free a buffer before it is counted
+/// as not kept (`writer_behind`): bounded, so a stuck writer never stalls the stream for good.
+const WRITER_WAIT: Duration = Duration::from_secs(2);
 
 /// Reasons a received frame was not kept, as keys of `not_kept_by_reason`.
 const NOT_KEPT_REASONS: [&str; 3] = ["writer_behind", "size_changed", "write_failed"];
@@ -130,7 +138,7 @@ fn keep(frame: &StereoFrame, tally: &mut FrameTally, writer: &mut FrameWriter) -
     if *tally.geometry.get_or_insert(geometry) != geometry || l.camera_count > 2 || l.row_len != l.width {
         return Err(1); // another size, more than two cameras, or not GRAY8
     }
-    let Some(mut pixels) = writer.buffer() else { return Err(0) };
+    let Some(mut pixels) = writer.buffer(WRITER_WAIT) else { return Err(0) };
     pixels.clear();
     for camera in 0..l.camera_count {
         for y in 0..l.height {

@@ -1,13 +1,15 @@
 //! The recorder's frame writer: a thread that encodes each kept frame's views as PNG files
 //! and appends its `frames.jsonl` line once the files are on disk (a line always names files
 //! that exist). The subscriber hands it copies of the pixels through a bounded channel and
-//! never waits for it: at most `capacity` frame buffers exist, reused round and round, so
-//! memory stays bounded; a frame that finds no free buffer is counted as not kept.
+//! waits for it only a bounded time: at most `capacity` frame buffers exist, reused round
+//! and round, so memory stays bounded; a frame that finds no free buffer within the wait is
+//! counted as not kept.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 use anyhow::{Context, Result};
 use crossbeam::channel::{bounded, Receiver, Sender, TryRecvError};
@@ -67,16 +69,17 @@ impl FrameWriter {
         Ok(Self { jobs: Some(jobs), free, allocated: 0, capacity, failed, thread: Some(thread) })
     }
 
-    /// An empty buffer for the next frame, or `None` when all `capacity` buffers are queued
-    /// for writing (the writer is behind).
-    pub fn buffer(&mut self) -> Option<Vec<u8>> {
+    /// An empty buffer for the next frame: a free one, a new one while fewer than
+    /// `capacity` exist, or else the first one the writer frees within `wait`. `None` when
+    /// the writer stays behind that long.
+    pub fn buffer(&mut self, wait: Duration) -> Option<Vec<u8>> {
         match self.free.try_recv() {
             Ok(b) => Some(b),
             Err(TryRecvError::Empty | TryRecvError::Disconnected) if self.allocated < self.capacity => {
                 self.allocated += 1;
                 Some(Vec::new())
             }
-            Err(_) => None,
+            Err(_) => self.free.recv_timeout(wait).ok(),
         }
     }
 
@@ -91,7 +94,7 @@ impl FrameWriter {
 
     /// Frames waiting to be written.
     pub fn queued(&self) -> usize {
-        self.jobs.as_ref().map_or(0, Sender::len)
+        self.jobs.as_ref().map_or(0, |jobs| jobs.len())
     }
 
     /// Whether a write has failed (the recording should end).
@@ -205,8 +208,8 @@ mod tests {
             std::fs::create_dir_all(dir.join(sub)).unwrap();
         }
         let mut w = FrameWriter::start(&dir, 2).unwrap();
-        assert!(w.buffer().is_some() && w.buffer().is_some());
-        assert!(w.buffer().is_none(), "two buffers exist and both are out");
+        assert!(w.buffer(Duration::ZERO).is_some() && w.buffer(Duration::ZERO).is_some());
+        assert!(w.buffer(Duration::from_millis(20)).is_none(), "two buffers exist and both are out");
         w.submit(job(4, 10));
         w.submit(job(6, 20));
         let report = w.finish();
