@@ -461,6 +461,26 @@ mod tests {
     }
 
     #[test]
+    fn a_recording_is_read_from_frames_jsonl_with_its_ids_and_capture_times() {
+        let d = tmp("recording");
+        for (dir, v) in [("left", 1), ("right", 2)] {
+            std::fs::create_dir_all(d.join(dir)).unwrap();
+            for n in ["a.png", "b.png", "c.png"] {
+                write_png(&d.join(dir).join(n), 4, 3, v);
+            }
+        }
+        let line = |id: u64, t: u64, n: &str| format!("{{\"id\":{id},\"capture_time_ns\":{t},\"left\":\"left/{n}\",\"right\":\"right/{n}\"}}\n");
+        std::fs::write(d.join("frames.jsonl"), line(5, 100, "c.png") + &line(9, 250, "a.png")).unwrap();
+        let s = load_sequence(&d, false).unwrap();
+        assert_eq!(s.frames, vec![(d.join("left/c.png"), Some(d.join("right/c.png"))), (d.join("left/a.png"), Some(d.join("right/a.png")))]);
+        let ids: Vec<(u64, u64)> = s.recorded.unwrap().iter().map(|r| (r.id, r.capture_time_ns)).collect();
+        assert_eq!(ids, [(5, 100), (9, 250)]);
+        assert_eq!((parse_rate("recorded"), parse_rate("0"), parse_rate("15")), (Ok(Rate::Recorded), Ok(Rate::Hz(0.0)), Ok(Rate::Hz(15.0))));
+        assert!(parse_rate("-1").is_err() && parse_rate("fast").unwrap_err().contains("recorded"));
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
     fn colour_pngs_become_bt709_gray() {
         let d = tmp("colour");
         let p = d.join("rgb.png");
