@@ -45,8 +45,9 @@ Examples:
 /// colour PNGs converted with the `image` crate's `to_luma8` (Y = 0.2126 R + 0.7152 G +
 /// 0.0722 B on the stored sRGB values, alpha dropped, 16-bit scaled to 8-bit). All images
 /// must have the same size. Frame ids count up from 0; capture and publish times are
-/// CLOCK_MONOTONIC at sending. The command waits for a subscriber before it starts, prints
-/// progress to stderr, and ends cleanly on Ctrl-C.
+/// CLOCK_MONOTONIC at sending (a recording keeps its ids and capture-time spacing). The
+/// command waits for a subscriber before it starts, prints progress to stderr, and ends
+/// cleanly on Ctrl-C.
 #[derive(Args, Debug)]
 #[command(after_help = EXAMPLES)]
 pub struct FeedArgs {
