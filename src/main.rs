@@ -30,8 +30,11 @@ enum Command {
     // Its help comes from `CameraArgs`'s doc comment.
     #[cfg(feature = "camera")]
     Camera(cli::camera::CameraArgs),
-    /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency.
+    /// Subscribe to `handeye/stereo` and report rate, gaps, rejections and latency (or, with
+    /// --telemetry, show the daemon's telemetry live).
     Monitor(cli::monitor::MonitorArgs),
+    /// Record the stereo stream, robot state and telemetry into a folder `feed` replays.
+    Record(cli::record::RecordArgs),
     /// Track one polygon through an image sequence with the affine contour tracker.
     Track(cli::track::TrackArgs),
     /// Run the simulator: physics, stereo rendering, robot controller, over shared memory.
@@ -58,6 +61,7 @@ fn main() -> Result<()> {
         #[cfg(feature = "camera")]
         Command::Camera(args) => cli::camera::run(args),
         Command::Monitor(args) => cli::monitor::run(args),
+        Command::Record(args) => cli::record::run(args),
         Command::Track(args) => cli::track::run(args),
         Command::Sim(args) => cli::sim::run(args),
         Command::Snapshot(args) => cli::snapshot::run(args),

@@ -21,7 +21,7 @@ use handeye_wire::{
 use crate::config::DaemonConfig;
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
-use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord};
+use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::step::{Cmd, Cycle, Step};
 use crate::phase::PhaseState;
@@ -54,6 +54,9 @@ pub struct HardLoop {
     mission: Mission,
     phase: PhaseState,
     timing: LatencyHistogram,
+    /// The stereo tracker update per cycle (all active trackers, summed), in the cycles that
+    /// updated one; reported in `daemon.json` and, per tracker, in the telemetry.
+    tracker_timing: LatencyHistogram,
     seq: u64,
     frames: u64,
     last_frame_id: Option<u64>,
@@ -79,6 +82,7 @@ impl HardLoop {
             mission: Mission::new(cfg, hint.as_ref())?,
             phase: PhaseState::AcquireGripper(AcquireGripper::new(0)),
             timing: LatencyHistogram::new(deadline_ns),
+            tracker_timing: LatencyHistogram::new(u64::MAX),
             seq: 0,
             frames: 0,
             last_frame_id: None,
@@ -136,7 +140,8 @@ impl HardLoop {
         let gap = self.last_frame_id.map_or(1, |last| frame_id.saturating_sub(last).max(1));
         self.last_frame_id = Some(frame_id);
         let dt_s = gap as f64 / self.mission.cfg.timing.frame_rate_hz;
-        let states = self.mission.trackers.update(left, right, dt_s);
+        let (states, update_ns) = self.mission.trackers.update_timed(left, right, dt_s, monotonic_ns);
+        self.telemetry.tracker_update_ns = update_ns;
         let cmd = self.decide(frame_index, frame_id, left, right, states);
         let phase = self.phase.phase();
         if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
@@ -151,6 +156,11 @@ impl HardLoop {
         };
         let command = self.stamp(&cmd, frame_id);
         self.fill_telemetry(frame_id, &states);
+        // Recorded from what the telemetry says, so a monitor computes the same numbers.
+        let stereo_update_ns: u64 = self.telemetry.tracker_update_ns.iter().sum();
+        if stereo_update_ns > 0 {
+            self.tracker_timing.record_ns(stereo_update_ns);
+        }
         CycleOutput { command, reports: self.mission.reporting.take_requests() }
     }
 
@@ -270,6 +280,10 @@ impl HardLoop {
                     t.tracker_confidence[i] = 0.0;
                 }
             }
+            if t.tracker_state[i] == 0 {
+                // Removed or deactivated by this cycle's phase: reported off, so not updated.
+                t.tracker_update_ns[i] = 0;
+            }
         }
         let in_servo = phase == Phase::Servo;
         for (dst, src) in t.servo_error.iter_mut().zip(self.mission.servo.error()) {
@@ -304,6 +318,7 @@ impl HardLoop {
         }
         let cmd = self.stamp(&Cmd::STOP, NO_FRAME);
         let states = StereoStates::default();
+        self.telemetry.tracker_update_ns = [0; 4]; // no tracker was updated for this sample
         self.fill_telemetry(NO_FRAME, &states);
         self.telemetry.time_ns = monotonic_ns();
         (cmd, self.telemetry)
@@ -337,6 +352,7 @@ impl HardLoop {
     /// What happened, for `daemon.json`.
     pub fn outcome(&self, wall_s: f64) -> DaemonOutcome {
         let t = self.timing();
+        let tt = &self.tracker_timing;
         let us = |ns: u64| ns as f64 / 1000.0;
         let phase = self.phase();
         let m = self.mission();
@@ -358,6 +374,13 @@ impl HardLoop {
                 deadline_misses: t.deadline_misses(),
                 cycles: t.count(),
                 robot_states: self.robot_states(),
+                tracker_update: TrackerTiming {
+                    us_p50: us(tt.percentile_ns(50.0)),
+                    us_p99: us(tt.percentile_ns(99.0)),
+                    us_max: us(tt.max_ns()),
+                    us_mean: tt.mean_ns() / 1000.0,
+                    cycles: tt.count(),
+                },
             },
             task: TaskRecord {
                 calibration: m.calibration.stats(),

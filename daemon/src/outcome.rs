@@ -52,6 +52,23 @@ pub struct LoopTiming {
     pub deadline_misses: u64,
     pub cycles: u64,
     pub robot_states: u64,
+    /// The trackers' own update time: `"tracker_update": {...}` in `daemon.json`.
+    pub tracker_update: TrackerTiming,
+}
+
+/// The stereo tracker update of a cycle (every active contour, both views, summed) over the
+/// cycles that updated at least one tracker. Telemetry's `tracker_update_ns` carries each
+/// cycle's per-tracker values, so `handeye monitor --telemetry` computes the same numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrackerTiming {
+    /// Percentiles as the loop's histogram reports them (the upper edge of the bucket, at
+    /// most 1/16 above the true value), µs.
+    pub us_p50: f64,
+    pub us_p99: f64,
+    pub us_max: f64,
+    pub us_mean: f64,
+    /// Cycles that updated at least one tracker.
+    pub cycles: u64,
 }
 
 /// What the phases found and did.
@@ -97,6 +114,7 @@ mod tests {
                 deadline_misses: 0,
                 cycles: 900,
                 robot_states: 1800,
+                tracker_update: TrackerTiming { us_p50: 60.0, us_p99: 85.0, us_max: 140.0, us_mean: 62.0, cycles: 880 },
             },
             task: TaskRecord {
                 calibration: None,
@@ -120,7 +138,7 @@ mod tests {
         let keys: Vec<&str> = value.as_object().unwrap().keys().map(String::as_str).collect();
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
-            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "calibration",
+            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "calibration",
             "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
             "servo_trace", "wall_s",
         ];

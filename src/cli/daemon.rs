@@ -55,7 +55,7 @@ pub struct DaemonArgs {
     out: Option<PathBuf>,
     /// Print the outcome as one JSON object: success, phase_reached, final_phase,
     /// failure_reason, servo_steps, loop_us_p50/p99/max/mean, deadline_misses, cycles,
-    /// calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), target_source
+    /// tracker_update (us_p50/p99/max/mean, cycles: the trackers' own update time), calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), target_source
     /// (hint or plan), plan (facets, candidates, chosen site, rejected sites and counts by
     /// reason, planner_ms), planning (frames answered and gripper tracker updates while the
     /// planner worked), servo_trace, wall_s.
@@ -100,7 +100,7 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         println!("{}", serde_json::to_string(o)?);
     } else {
         println!(
-            "daemon: {} (reached {}){}; {} servo steps; loop p50 {:.0} µs, p99 {:.0} µs, {} deadline misses in {} cycles",
+            "daemon: {} (reached {}){}; {} servo steps; loop p50 {:.0} µs, p99 {:.0} µs, {} deadline misses in {} cycles; tracker update p50 {:.0} µs, p99 {:.0} µs",
             o.end.final_phase,
             o.end.phase_reached,
             o.end.failure_reason.as_ref().map(|r| format!(": {r}")).unwrap_or_default(),
@@ -108,7 +108,9 @@ pub fn run(args: DaemonArgs) -> Result<()> {
             o.timing.loop_us_p50,
             o.timing.loop_us_p99,
             o.timing.deadline_misses,
-            o.timing.cycles
+            o.timing.cycles,
+            o.timing.tracker_update.us_p50,
+            o.timing.tracker_update.us_p99
         );
     }
     if !o.end.success {

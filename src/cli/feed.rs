@@ -1,4 +1,5 @@
-//! `handeye feed`: publishes stereo frames from PNG files on `handeye/stereo`, like a camera.
+//! `handeye feed`: publishes stereo frames from PNG files on `handeye/stereo`, like a camera,
+//! or replays a recording of `handeye record` with its frame ids and timing.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -9,6 +10,7 @@ use handeye_wire::stereo::{Delivery, PublishError, StereoFormat, StereoPublisher
 use handeye_wire::{monotonic_ns, WireNode};
 
 use super::domain::DomainArgs;
+use super::recording::{self, RecordedStamp, ReplayClock};
 use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
@@ -19,13 +21,23 @@ count up from 0; capture and publish times are CLOCK_MONOTONIC ns at sending. Th
 a subscriber before it starts, prints progress to stderr, lets the subscriber take the last
 frame before it exits, and ends cleanly on Ctrl-C.
 
+A recording of `handeye record` (DIR holds frames.jsonl) is replayed with its own frame ids,
+gaps included, and its capture-time spacing: frame i is stamped (replay start + its capture
+time - the first frame's), so recording the replay again gives the same ids and the same
+capture-time differences. Its default rate is `recorded` (each frame sent at its recorded
+offset); --rate-hz 0 sends them as fast as the subscriber takes them, none lost; --rate-hz HZ
+paces them at HZ, stamps unchanged.
+
 Examples:
   # the cube sequence as both views, 30 frames/s, forever (stop with Ctrl-C)
   handeye feed --mono --dir ../shared/data/visp-cube --loop
   # 200 frames, as fast as the subscriber takes them, none lost
   handeye feed --mono --dir ../shared/data/visp-cube --count 200 --rate-hz 0
   # a stereo pair sequence: DIR/left/*.png and DIR/right/*.png with matching names
-  handeye feed --dir recordings/run3 --rate-hz 15";
+  handeye feed --dir pairs/run3 --rate-hz 15
+  # replay a recording at its recorded timing, then losslessly as fast as possible
+  handeye feed --dir recordings/run3
+  handeye feed --dir recordings/run3 --rate-hz 0";
 
 /// Publish stereo frames from PNG files on `handeye/stereo`, like a camera would.
 ///
@@ -33,13 +45,15 @@ Examples:
 /// colour PNGs converted with the `image` crate's `to_luma8` (Y = 0.2126 R + 0.7152 G +
 /// 0.0722 B on the stored sRGB values, alpha dropped, 16-bit scaled to 8-bit). All images
 /// must have the same size. Frame ids count up from 0; capture and publish times are
-/// CLOCK_MONOTONIC at sending. The command waits for a subscriber before it starts, prints
-/// progress to stderr, and ends cleanly on Ctrl-C.
+/// CLOCK_MONOTONIC at sending (a recording keeps its ids and capture-time spacing). The
+/// command waits for a subscriber before it starts, prints progress to stderr, and ends
+/// cleanly on Ctrl-C.
 #[derive(Args, Debug)]
 #[command(after_help = EXAMPLES)]
 pub struct FeedArgs {
     /// Folder of PNGs: with `left/` and `right/` sub-folders (a left image and its right image
-    /// share a file name), or, with --mono, a flat folder.
+    /// share a file name), or, with --mono, a flat folder. A folder with `frames.jsonl` is a
+    /// recording (`handeye record`): its lines give the frames, ids and capture times.
     #[arg(long, value_name = "DIR")]
     pub dir: PathBuf,
 
@@ -50,9 +64,11 @@ pub struct FeedArgs {
     /// Frames per second. 0 = as fast as the slowest subscriber takes them, never dropping
     /// one (each frame waits until the previous one was released by every subscriber).
     /// Above 0 the feed behaves like a camera: it never waits, and a subscriber that lags
-    /// loses its oldest queued frame.
-    #[arg(long, default_value_t = 30.0, value_name = "HZ")]
-    pub rate_hz: f64,
+    /// loses its oldest queued frame. `recorded` (a recording only) = at the recorded
+    /// capture-time spacing, like the camera it came from. Default: `recorded` for a
+    /// recording, 30 for a PNG folder.
+    #[arg(long, value_name = "HZ|recorded", value_parser = parse_rate)]
+    pub rate_hz: Option<Rate>,
 
     /// Stop after N frames (0 = after the last file, or never with --loop).
     #[arg(long, default_value_t = 0, value_name = "N")]
@@ -72,6 +88,25 @@ pub struct FeedArgs {
     pub domain: DomainArgs,
 }
 
+/// How fast frames are sent (`--rate-hz`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// Frames per second; 0 = lossless, as fast as the subscribers take them.
+    Hz(f64),
+    /// A recording's own capture-time spacing.
+    Recorded,
+}
+
+fn parse_rate(text: &str) -> Result<Rate, String> {
+    if text.trim() == "recorded" {
+        return Ok(Rate::Recorded);
+    }
+    match text.trim().parse::<f64>() {
+        Ok(hz) if hz.is_finite() && hz >= 0.0 => Ok(Rate::Hz(hz)),
+        _ => Err(format!("'{text}' is neither a rate in Hz (a number >= 0) nor `recorded`")),
+    }
+}
+
 /// The image files to send, in order, and their common size.
 #[derive(Debug)]
 pub struct Sequence {
@@ -79,6 +114,8 @@ pub struct Sequence {
     pub frames: Vec<(PathBuf, Option<PathBuf>)>,
     pub width: u32,
     pub height: u32,
+    /// A recording's frame ids and capture times, one per frame (`None`: a PNG folder).
+    pub recorded: Option<Vec<RecordedStamp>>,
 }
 
 /// PNG files directly in `dir`, sorted by file name.
@@ -99,7 +136,12 @@ fn list_pngs(dir: &Path) -> Result<Vec<PathBuf>> {
 /// Finds the frames of `dir` (see [`FeedArgs::dir`]) and checks that every image exists and
 /// has the size of the first, reading only the PNG headers. Errors name the file.
 pub fn load_sequence(dir: &Path, mono: bool) -> Result<Sequence> {
-    let frames: Vec<(PathBuf, Option<PathBuf>)> = if mono {
+    let mut recorded = None;
+    let frames: Vec<(PathBuf, Option<PathBuf>)> = if !mono && dir.join(recording::FRAMES_FILE).is_file() {
+        let lines = recording::read_frames(dir)?;
+        recorded = Some(lines.iter().map(|f| f.stamp).collect());
+        lines.into_iter().map(|f| (f.left, f.right)).collect()
+    } else if mono {
         list_pngs(dir)?.into_iter().map(|p| (p, None)).collect()
     } else {
         let (left_dir, right_dir) = (dir.join("left"), dir.join("right"));
@@ -143,7 +185,7 @@ pub fn load_sequence(dir: &Path, mono: bool) -> Result<Sequence> {
             }
         }
     }
-    Ok(Sequence { frames, width, height })
+    Ok(Sequence { frames, width, height, recorded })
 }
 
 fn png_size(path: &Path) -> Result<(u32, u32)> {
@@ -170,15 +212,21 @@ pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayIm
 }
 
 pub fn run(args: FeedArgs) -> Result<()> {
-    if !(args.rate_hz >= 0.0 && args.rate_hz.is_finite()) {
-        bail!("--rate-hz must be a number >= 0 (got {})", args.rate_hz);
-    }
     let seq = load_sequence(&args.dir, args.mono)?;
+    let clock = seq.recorded.clone().map(ReplayClock::new);
+    let rate = match (args.rate_hz, &clock) {
+        (Some(Rate::Recorded), None) => {
+            bail!("--rate-hz recorded replays a recording, but {} has no {}", args.dir.display(), recording::FRAMES_FILE)
+        }
+        (Some(rate), _) => rate,
+        (None, Some(_)) => Rate::Recorded,
+        (None, None) => Rate::Hz(30.0),
+    };
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-feed")?;
     let geometry = StereoFormat::gray8_pair(seq.width, seq.height);
     let wait = Duration::from_secs_f64(args.wait_subscriber_s);
-    let lossless = args.rate_hz == 0.0;
+    let lossless = rate == Rate::Hz(0.0);
     let delivery = if lossless {
         // One frame in flight fits every subscriber queue, so nothing can overflow.
         let stall = if wait.is_zero() { Duration::from_secs(30) } else { wait };
@@ -188,24 +236,35 @@ pub fn run(args: FeedArgs) -> Result<()> {
     };
     let mut publisher = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery, ..Default::default() })?;
     eprintln!(
-        "feed: {} frames of 2 x {}x{} GRAY8 from {} on handeye/stereo, domain '{domain}', {}",
+        "feed: {} frames of 2 x {}x{} GRAY8 from {}{} on handeye/stereo, domain '{domain}', {}",
         seq.frames.len(),
         seq.width,
         seq.height,
         args.dir.display(),
-        if lossless { "as fast as the subscriber takes them (--rate-hz 0)".to_owned() } else { format!("{} frames/s", args.rate_hz) }
+        if clock.is_some() { " (a recording: its frame ids and capture-time spacing)" } else { "" },
+        match rate {
+            Rate::Hz(0.0) => "as fast as the subscriber takes them (--rate-hz 0)".to_owned(),
+            Rate::Hz(hz) => format!("{hz} frames/s"),
+            Rate::Recorded => "at the recorded timing".to_owned(),
+        }
     );
     if !wait.is_zero() && !wait_for_subscriber(&publisher, wait, domain)? {
         return Ok(()); // interrupted
     }
 
-    let period = (!lossless).then(|| Duration::from_secs_f64(1.0 / args.rate_hz));
+    let period = match rate {
+        Rate::Hz(hz) if hz > 0.0 => Some(Duration::from_secs_f64(1.0 / hz)),
+        _ => None,
+    };
     let start = Instant::now();
     let mut next_send = start;
     let mut next_progress = start + Duration::from_secs(1);
     let mut next_subscriber_check = start;
     let mut sent = 0u64;
     let mut index = 0usize;
+    let mut pass = 0u64;
+    // CLOCK_MONOTONIC ns of the replay's first frame: recorded offsets count from it.
+    let mut replay_start_ns: Option<u64> = None;
     let mut interrupted = false;
     loop {
         if args.count > 0 && sent >= args.count {
@@ -219,8 +278,10 @@ pub fn run(args: FeedArgs) -> Result<()> {
                 break;
             }
             index = 0;
+            pass += 1;
         }
         let (left_path, right_path) = &seq.frames[index];
+        let stamp = clock.as_ref().map(|c| c.stamp(index, pass));
         index += 1;
         let left = decode_gray(left_path, seq.width, seq.height)?;
         let right = match right_path {
@@ -235,7 +296,15 @@ pub fn run(args: FeedArgs) -> Result<()> {
             }
             // A camera does not catch up in a burst after a stall.
             next_send = (next_send + period).max(Instant::now());
-        } else if !wait.is_zero() && Instant::now() >= next_subscriber_check {
+        } else if let (Rate::Recorded, Some((_, offset_ns)), Some(t0)) = (rate, stamp, replay_start_ns) {
+            // Late frames go at once: a replay keeps every frame, and its stamps keep the timing.
+            let due_ns = t0 + offset_ns;
+            let now_ns = monotonic_ns();
+            if due_ns > now_ns && !node.sleep(Duration::from_nanos(due_ns - now_ns)) {
+                interrupted = true;
+                break;
+            }
+        } else if lossless && !wait.is_zero() && Instant::now() >= next_subscriber_check {
             // Lossless: frames sent while no one listens would be lost, so wait for one.
             next_subscriber_check = Instant::now() + Duration::from_millis(250);
             if publisher.subscriber_count() == 0 {
@@ -247,10 +316,17 @@ pub fn run(args: FeedArgs) -> Result<()> {
             }
         }
         let plane = left.as_raw().len();
-        let result = publisher.publish(monotonic_ns(), |payload| {
+        let fill = |payload: &mut [u8]| {
             payload[..plane].copy_from_slice(left.as_raw());
             payload[plane..].copy_from_slice(right.as_ref().unwrap_or(&left).as_raw());
-        });
+        };
+        let result = match stamp {
+            Some((id, offset_ns)) => {
+                let t0 = *replay_start_ns.get_or_insert_with(monotonic_ns);
+                publisher.publish_with_id(id, t0 + offset_ns, fill)
+            }
+            None => publisher.publish(monotonic_ns(), fill),
+        };
         match result {
             Ok(_) => sent += 1,
             Err(PublishError::Interrupted) => {
@@ -269,7 +345,12 @@ pub fn run(args: FeedArgs) -> Result<()> {
             eprintln!("feed: {sent} frames, {:.1} frames/s, {} subscriber(s)", sent as f64 / secs, publisher.subscriber_count());
         }
     }
-    finish(&mut publisher, &node, period, interrupted)?;
+    // At the recorded timing the feed is a camera too: the last frame gets two periods.
+    let camera_period = match (rate, &clock) {
+        (Rate::Recorded, Some(c)) => Some(Duration::from_nanos(c.mean_period_ns())),
+        _ => period,
+    };
+    finish(&mut publisher, &node, camera_period, interrupted)?;
     let secs = start.elapsed().as_secs_f64().max(1e-9);
     eprintln!(
         "feed: {} after {sent} frames in {secs:.2} s ({:.1} frames/s)",
@@ -378,6 +459,26 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
         let e = load_sequence(&tmp("flat"), false).unwrap_err().to_string();
         assert!(e.contains("--mono"), "{e}");
+    }
+
+    #[test]
+    fn a_recording_is_read_from_frames_jsonl_with_its_ids_and_capture_times() {
+        let d = tmp("recording");
+        for (dir, v) in [("left", 1), ("right", 2)] {
+            std::fs::create_dir_all(d.join(dir)).unwrap();
+            for n in ["a.png", "b.png", "c.png"] {
+                write_png(&d.join(dir).join(n), 4, 3, v);
+            }
+        }
+        let line = |id: u64, t: u64, n: &str| format!("{{\"id\":{id},\"capture_time_ns\":{t},\"left\":\"left/{n}\",\"right\":\"right/{n}\"}}\n");
+        std::fs::write(d.join("frames.jsonl"), line(5, 100, "c.png") + &line(9, 250, "a.png")).unwrap();
+        let s = load_sequence(&d, false).unwrap();
+        assert_eq!(s.frames, vec![(d.join("left/c.png"), Some(d.join("right/c.png"))), (d.join("left/a.png"), Some(d.join("right/a.png")))]);
+        let ids: Vec<(u64, u64)> = s.recorded.unwrap().iter().map(|r| (r.id, r.capture_time_ns)).collect();
+        assert_eq!(ids, [(5, 100), (9, 250)]);
+        assert_eq!((parse_rate("recorded"), parse_rate("0"), parse_rate("15")), (Ok(Rate::Recorded), Ok(Rate::Hz(0.0)), Ok(Rate::Hz(15.0))));
+        assert!(parse_rate("-1").is_err() && parse_rate("fast").unwrap_err().contains("recorded"));
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]

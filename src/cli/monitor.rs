@@ -1,4 +1,5 @@
-//! `handeye monitor`: subscribes to `handeye/stereo` and reports what arrives.
+//! `handeye monitor`: subscribes to `handeye/stereo` and reports what arrives; with
+//! `--telemetry`, shows the daemon's telemetry live instead (`super::telemetry`).
 
 use std::time::{Duration, Instant};
 
@@ -22,13 +23,28 @@ Examples:
   handeye monitor                                 # report once a second until Ctrl-C
   handeye monitor --count 200 --json --checksum   # 200 frames, then one JSON object
   handeye monitor --timeout-s 0                   # wait for frames forever
+  handeye monitor --telemetry                     # the daemon, live: phase, trackers, timing
+  handeye monitor --telemetry --json > tel.jsonl  # one JSON object per telemetry sample
 
 JSON keys: frames, rejected (total), rejected_by_reason {version, pixel_format, zero_size,
 too_large, stride, payload_length, frame_id}, missed, fps, latency_ns_p50, latency_ns_p99,
 latency_ns_max (null without frames), receive_errors, publisher_up, publisher_gone, events
 [{event, time_ns, last_frame_id, frames}], completed (--count reached), duration_s, and with
 --checksum: checksum (16 hex digits, FNV-1a 64 over every frame's pixels in order, rows
-without stride padding, left then right; see handeye_wire::checksum).";
+without stride padding, left then right; see handeye_wire::checksum).
+
+--telemetry reads handeye/telemetry instead of the frames: the daemon's phase and status, each
+tracker's state, confidence, corners and update time, the servo error, the cycle time p50/p99
+and the trackers' own update time p50/p99 (all active trackers of a cycle summed, over the
+cycles that updated one) with the rate that time allows (updates/s), beside the frames/s
+actually tracked. In a terminal the panel is redrawn in place; otherwise it is printed every
+--progress-s. It ends when the daemon's telemetry publisher goes away, after --count samples,
+after --timeout-s without one, or on Ctrl-C. With --json: one object per sample (frame_id,
+time_ns, phase, reason, planning, loop_ns, deadline_misses, trackers [{tracker, state,
+confidence, updates, update_ns, corners_px}], servo_error, servo_steps, and stats {samples,
+cycles, cycle_us_p50/p99, tracker_cycles, tracker_update_us_p50/p99/max, tracker_rate_hz,
+cycles_per_s, tracked_fps} over all samples so far: the last line's stats are the run's,
+computed like daemon.json's loop_us_* and tracker_update).";
 
 /// Subscribe to `handeye/stereo` and report frames received, rejected samples (by reason),
 /// missed frame ids, frame rate and transport latency (publish stamp to receive, ns).
@@ -39,7 +55,11 @@ without stride padding, left then right; see handeye_wire::checksum).";
 #[derive(Args, Debug)]
 #[command(after_help = EXAMPLES)]
 pub struct MonitorArgs {
-    /// Stop after N valid frames (0 = run until Ctrl-C or --timeout-s).
+    /// Show the daemon's telemetry (handeye/telemetry) live instead of the frames.
+    #[arg(long, conflicts_with_all = ["checksum", "queue"])]
+    pub telemetry: bool,
+
+    /// Stop after N valid frames, or N telemetry samples (0 = run until Ctrl-C or --timeout-s).
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub count: u64,
 
@@ -92,6 +112,16 @@ fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
 }
 
 pub fn run(args: MonitorArgs) -> Result<()> {
+    if args.telemetry {
+        return super::telemetry::run(&super::telemetry::TelemetryOptions {
+            domain: &args.domain.domain,
+            count: args.count,
+            json: args.json,
+            timeout_s: args.timeout_s,
+            progress_s: args.progress_s,
+            report: args.report.as_deref(),
+        });
+    }
     let domain = &args.domain.domain;
     let node = WireNode::create(domain, "handeye-monitor")?;
     let mut sub = StereoSubscriber::create(&node, args.queue)?;

@@ -137,6 +137,10 @@ impl WireMessage for Telemetry {
         if let Some(&bad) = self.tracker_state.iter().find(|&&s| s > 2) {
             return Err(MessageReject::UnknownEnum { field: "tracker_state", value: bad });
         }
+        if self.tracker_state.iter().zip(&self.tracker_update_ns).any(|(&state, &ns)| state == 0 && ns != 0) {
+            // A tracker that is off was not updated: its update time must be 0.
+            return Err(MessageReject::OutOfRange { field: "tracker_update_ns" });
+        }
         finite("tracker_confidence", &self.tracker_confidence)?;
         if self.tracker_confidence.iter().any(|c| !(0.0..=1.0).contains(c)) {
             return Err(MessageReject::OutOfRange { field: "tracker_confidence" });
@@ -475,7 +479,7 @@ mod tests {
     #[test]
     fn states_are_checked_field_by_field() {
         let bad: Vec<(RobotState, &str)> = vec![
-            (RobotState { version: 2, ..state() }, "version"),
+            (RobotState { version: WIRE_VERSION + 1, ..state() }, "version"),
             (RobotState { reject: 17, ..state() }, "enum"),
             (RobotState { flags: 1 << 8, ..state() }, "range"),
             (RobotState { joints_rad: [0.0, 0.0, f32::NAN, 0.0, 0.0], ..state() }, "non_finite"),
@@ -505,6 +509,10 @@ mod tests {
         assert_eq!(t.validate().unwrap_err().key(), "enum");
         let t = Telemetry { tracker_state: [0, 1, 2, 3], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");
+        let t = Telemetry { tracker_state: [1, 2, 0, 0], tracker_update_ns: [9_000, 8_000, 0, 0], ..Telemetry::default() };
+        assert_eq!(t.validate(), Ok(()));
+        let t = Telemetry { tracker_state: [1, 0, 0, 0], tracker_update_ns: [9_000, 8_000, 0, 0], ..Telemetry::default() };
+        assert_eq!(t.validate(), Err(MessageReject::OutOfRange { field: "tracker_update_ns" }));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use iceoryx2::prelude::*;
 
 /// Version of the wire contract. Bumped on any change to a type in this module; a receiver
 /// rejects samples of any other version.
-pub const WIRE_VERSION: u32 = 1;
+pub const WIRE_VERSION: u32 = 2;
 
 /// Service names (iceoryx2). The same names are used for the matching event services that
 /// wake subscribers (see `wire/README.md`).
@@ -343,6 +343,10 @@ pub struct Telemetry {
     pub deadline_misses: u64,
     /// Tracker updates so far, per tracker (rises at frame rate while a tracker runs).
     pub tracker_updates: [u64; TELEMETRY_TRACKERS],
+    /// How long each tracker's update took this cycle, nanoseconds of the daemon's
+    /// `CLOCK_MONOTONIC`; 0 for a tracker not updated this cycle. Their sum is the cycle's
+    /// stereo tracker update, the time `daemon.json`'s `tracker_update` percentiles are over.
+    pub tracker_update_ns: [u64; TELEMETRY_TRACKERS],
     /// 0 = off, 1 = tracking, 2 = lost, per tracker.
     pub tracker_state: [u32; TELEMETRY_TRACKERS],
     /// Tracker confidence in [0, 1], per tracker.
@@ -369,6 +373,7 @@ impl Default for Telemetry {
             loop_ns: 0,
             deadline_misses: 0,
             tracker_updates: [0; TELEMETRY_TRACKERS],
+            tracker_update_ns: [0; TELEMETRY_TRACKERS],
             tracker_state: [0; TELEMETRY_TRACKERS],
             tracker_confidence: [0.0; TELEMETRY_TRACKERS],
             tracker_corners_px: [[[f32::NAN; 2]; TELEMETRY_CORNERS]; TELEMETRY_TRACKERS],
@@ -418,6 +423,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<StereoHeader>(), 4 * 2 + 8 * 3 + 4 * 4);
         assert_eq!(std::mem::size_of::<RobotState>(), 4 * 2 + 8 * 4 + 4 * (3 + 1 + 5 + 1 + 2));
         assert_eq!(std::mem::size_of::<RobotCommand>(), 4 * 2 + 8 * 3 + 4 * (3 + 1 + 1 + 1));
+        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96);
     }
 
     #[test]

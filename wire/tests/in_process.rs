@@ -350,3 +350,26 @@ fn flush_waits_until_the_subscriber_has_taken_every_frame() {
     p.publish(0, fill_pattern(2, &geometry)).unwrap();
     assert_eq!(drain(&mut sub), vec![2]);
 }
+
+#[test]
+fn chosen_frame_ids_keep_their_gaps_and_must_increase() {
+    // A replayed recording keeps its ids: the subscriber must count the same gaps.
+    let d = TestDomain::new("chosen-ids");
+    let pub_node = WireNode::create(&d.0, "pub").unwrap();
+    let sub_node = WireNode::create(&d.0, "sub").unwrap();
+    let geometry = StereoFormat::gray8_pair(8, 4);
+    let mut sub = StereoSubscriber::create(&sub_node, 2).unwrap();
+    let mut publisher = StereoPublisher::create(&pub_node, geometry, StereoPublisherOptions::default()).unwrap();
+    for (id, capture_ns) in [(5u64, 100u64), (6, 133), (9, 233)] {
+        assert_eq!(publisher.publish_with_id(id, capture_ns, fill_pattern(id, &geometry)).unwrap(), id);
+        let f = expect_frame(&mut sub);
+        assert_eq!((f.frame_id(), f.header().capture_time_ns), (id, capture_ns));
+    }
+    assert_eq!(sub.stats().missed, 2, "ids 7 and 8 were skipped");
+    assert!(matches!(
+        publisher.publish_with_id(9, 300, fill_pattern(9, &geometry)),
+        Err(PublishError::FrameIdNotIncreasing { frame_id: 9, next: 10 })
+    ));
+    assert_eq!(publisher.next_frame_id(), 10);
+    assert_eq!(publisher.publish(400, fill_pattern(10, &geometry)).unwrap(), 10);
+}

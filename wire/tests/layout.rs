@@ -49,18 +49,19 @@ fn robot_command_offsets_match_the_readme() {
 
 #[test]
 fn telemetry_offsets_match_the_readme() {
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (488, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (520, 8));
     assert_eq!(offset_of!(Telemetry, phase), 4);
     assert_eq!(offset_of!(Telemetry, frame_id), 8);
     assert_eq!(offset_of!(Telemetry, time_ns), 16);
     assert_eq!(offset_of!(Telemetry, loop_ns), 24);
     assert_eq!(offset_of!(Telemetry, deadline_misses), 32);
     assert_eq!(offset_of!(Telemetry, tracker_updates), 40);
-    assert_eq!(offset_of!(Telemetry, tracker_state), 72);
-    assert_eq!(offset_of!(Telemetry, tracker_confidence), 88);
-    assert_eq!(offset_of!(Telemetry, tracker_corners_px), 104);
-    assert_eq!(offset_of!(Telemetry, servo_error), 360);
-    assert_eq!(offset_of!(Telemetry, servo_steps), 384);
-    assert_eq!(offset_of!(Telemetry, planning), 388);
-    assert_eq!(offset_of!(Telemetry, reason), 392);
+    assert_eq!(offset_of!(Telemetry, tracker_update_ns), 72);
+    assert_eq!(offset_of!(Telemetry, tracker_state), 104);
+    assert_eq!(offset_of!(Telemetry, tracker_confidence), 120);
+    assert_eq!(offset_of!(Telemetry, tracker_corners_px), 136);
+    assert_eq!(offset_of!(Telemetry, servo_error), 392);
+    assert_eq!(offset_of!(Telemetry, servo_steps), 416);
+    assert_eq!(offset_of!(Telemetry, planning), 420);
+    assert_eq!(offset_of!(Telemetry, reason), 424);
 }

@@ -119,7 +119,31 @@ impl StereoTrackerSet {
 
     /// Updates every active tracker on its view, `dt_s` seconds after the previous pair.
     pub fn update(&mut self, left: &ImageView<'_>, right: &ImageView<'_>, dt_s: f64) -> StereoStates {
+        self.update_timed(left, right, dt_s, || 0).0
+    }
+
+    /// [`Self::update`], also measuring each slot's update with `now_ns` (read before and
+    /// after each tracker; vision has no clock of its own, so the caller passes one). The
+    /// durations are in slot order — gripper left, gripper right, target left, target right —
+    /// and 0 only for a slot that was not updated (an update reads at least 1 ns).
+    ///
+    /// ```
+    /// use std::cell::Cell;
+    /// use handeye_vision::image::ImageBuf;
+    /// use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
+    /// let mut img = ImageBuf::filled(160, 120, 200);
+    /// for y in 40..80 { for x in 60..100 { img.set(x, y, 50); } }
+    /// let square = [[59.5, 39.5], [99.5, 39.5], [99.5, 79.5], [59.5, 79.5]];
+    /// let mut set = StereoTrackerSet::new();
+    /// set.insert(Role::Target, View::Right, ContourTracker::new(TrackerConfig::default(), &square).unwrap());
+    /// let clock = Cell::new(0u64);
+    /// let tick = || { clock.set(clock.get() + 1_000); clock.get() }; // 1 µs per reading
+    /// let (_, ns) = set.update_timed(&img.view(), &img.view(), 0.02, tick);
+    /// assert_eq!(ns, [0, 0, 0, 1_000]);
+    /// ```
+    pub fn update_timed(&mut self, left: &ImageView<'_>, right: &ImageView<'_>, dt_s: f64, now_ns: impl Fn() -> u64) -> (StereoStates, [u64; 4]) {
         let mut states = StereoStates::default();
+        let mut elapsed_ns = [0u64; 4];
         for role in Role::ALL {
             for view in View::ALL {
                 let s = slot(role, view);
@@ -131,10 +155,12 @@ impl StereoTrackerSet {
                         View::Left => left,
                         View::Right => right,
                     };
+                    let start_ns = now_ns();
                     states.states[s] = Some(t.update(image, dt_s));
+                    elapsed_ns[s] = now_ns().saturating_sub(start_ns).max(1);
                 }
             }
         }
-        states
+        (states, elapsed_ns)
     }
 }

@@ -216,7 +216,7 @@ mod tests {
     #[test]
     fn each_rule_rejects_with_its_own_key() {
         let cases: Vec<(StereoHeader, usize, &str)> = vec![
-            (StereoHeader { version: 2, ..good() }, GOOD_LEN, "version"),
+            (StereoHeader { version: WIRE_VERSION + 1, ..good() }, GOOD_LEN, "version"),
             (StereoHeader { version: 0, ..good() }, GOOD_LEN, "version"),
             (StereoHeader { pixel_format: 0, ..good() }, GOOD_LEN, "pixel_format"),
             (StereoHeader { pixel_format: 7, ..good() }, GOOD_LEN, "pixel_format"),

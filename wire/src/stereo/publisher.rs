@@ -75,6 +75,8 @@ pub enum PublishError {
     NoCapacity { waited: Duration },
     #[error("interrupted (SIGINT/SIGTERM) while waiting for a free slot")]
     Interrupted,
+    #[error("frame id {frame_id} is below the next id {next}: ids must strictly increase")]
+    FrameIdNotIncreasing { frame_id: u64, next: u64 },
     #[error("could not send the sample: {detail}")]
     Send { detail: String },
     #[error("could not notify the subscribers: {detail}")]
@@ -237,6 +239,23 @@ impl StereoPublisher {
         header.capture_time_ns = capture_time_ns;
         self.send(header, self.layout.payload_len, fill)?;
         self.next_frame_id += 1;
+        Ok(frame_id)
+    }
+
+    /// Like [`StereoPublisher::publish`], with the frame id chosen by the caller: a replay of
+    /// a recording keeps the recorded ids, gaps included, so a subscriber counts the same
+    /// missed frames the recorder did. `frame_id` must be at least
+    /// [`StereoPublisher::next_frame_id`] (ids strictly increase); later `publish` calls go on
+    /// from `frame_id + 1`.
+    pub fn publish_with_id(&mut self, frame_id: u64, capture_time_ns: u64, fill: impl FnOnce(&mut [u8])) -> Result<u64, PublishError> {
+        if frame_id < self.next_frame_id {
+            return Err(PublishError::FrameIdNotIncreasing { frame_id, next: self.next_frame_id });
+        }
+        let mut header = self.geometry.header();
+        header.frame_id = frame_id;
+        header.capture_time_ns = capture_time_ns;
+        self.send(header, self.layout.payload_len, fill)?;
+        self.next_frame_id = frame_id.saturating_add(1);
         Ok(frame_id)
     }
 
