@@ -67,12 +67,16 @@ pub struct SimArgs {
     seed: Option<u64>,
     /// With --seed: a random layout of all the scenario's blocks instead (positions in
     /// x 0.27..0.45 m with the whole block inside, y -0.15..0.15 m, at least 60 mm
-    /// between their bounding circles; kinds, sizes and shades as written; any yaw at which
-    /// every edge the cameras see shows by 12 grey levels or more under the scenario's light).
-    /// A task with an indicated point gets a random target and the point within 15 mm of it.
-    /// What `handeye batch` runs.
+    /// between their bounding circles; kinds, sizes and shades as written; any yaw, drawn
+    /// once). A task with an indicated point gets a random target and the point within
+    /// 15 mm of it. What `handeye batch` runs.
     #[arg(long, requires = "seed")]
     random_layout: bool,
+    /// With --seed: draw the whole work cell from the scenario's [randomize] ranges (or the
+    /// defaults): cameras, light, shades, 2-5 blocks of every kind, noise, blur and the
+    /// indicated point (see scenarios/random.toml). What `handeye batch --randomize` runs.
+    #[arg(long, requires = "seed", conflicts_with = "random_layout")]
+    randomize: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
     /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
     /// before the first frame, for `handeye daemon --hint`.
@@ -109,18 +113,27 @@ pub fn quiet_mesa() {
     }
 }
 
+/// The scenario as a run with `--seed` lays it out: the target moved a little, every block
+/// laid out afresh (`--random-layout`), or a whole work cell drawn (`--randomize`). One
+/// function for `handeye sim` and `handeye run`, which must agree on the indicated point.
+pub fn lay_out(scenario: &mut Scenario, file: &std::path::Path, seed: Option<u64>, random_layout: bool, randomize: bool) -> Result<()> {
+    let Some(seed) = seed else { return Ok(()) };
+    if randomize {
+        scenario.randomise_cell(seed).with_context(|| format!("{}: seed {seed}", file.display()))?;
+    } else if random_layout {
+        if !scenario.randomise_layout(seed) {
+            anyhow::bail!("{}: the blocks do not fit a random layout (seed {seed})", file.display());
+        }
+    } else {
+        scenario.randomise_target(seed);
+    }
+    Ok(())
+}
+
 pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
     let mut scenario = Scenario::load(&args.scenario)?;
-    if let Some(seed) = args.seed {
-        if args.random_layout {
-            if !scenario.randomise_layout(seed) {
-                anyhow::bail!("{}: the blocks do not fit a random layout (seed {seed})", args.scenario.display());
-            }
-        } else {
-            scenario.randomise_target(seed);
-        }
-    }
+    lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize)?;
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
     let adapter = runner.renderer.adapter();
@@ -203,6 +216,10 @@ pub fn run(args: SimArgs) -> Result<()> {
                 .iter()
                 .map(|b| LaidOutBlock { name: b.name.clone(), kind: b.kind, size_mm: b.size_mm, position_m: b.position_m, yaw_deg: b.yaw_deg })
                 .collect(),
+            target_graspability: handeye_sim::referee::graspable::judge_block(
+                &scenario.blocks[runner.sim.target_index()],
+                &scenario.cameras.iter().map(|c| c.position_m).collect::<Vec<_>>(),
+            ),
             daemon: runner.watch.clone(),
         };
         if let Some(path) = &args.verdict_out {
