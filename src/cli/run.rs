@@ -191,7 +191,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     let temp = args.out.is_none();
     let dir = args.out.clone().unwrap_or_else(|| std::env::temp_dir().join(format!("handeye-run-{}", std::process::id())));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    for stale in ["hint.json", "sim.json", "daemon.json", "run.json"] {
+    for stale in ["hint.json", "hint.json.none", "sim.json", "daemon.json", "run.json"] {
         let _ = std::fs::remove_file(dir.join(stale));
     }
     let result = run_in(&args, &scenario, &dir, start);
@@ -256,7 +256,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     let mut sim = spawn("sim", &sim_args, dir)?;
     let deadline = start + Duration::from_secs_f64(args.timeout_s);
     // The hint appears once the simulator has built the scene (before its first frame).
-    while !dir.join("hint.json").exists() {
+    let no_hint = super::sim::no_hint_path(&dir.join("hint.json"));
+    while !dir.join("hint.json").exists() && !no_hint.exists() {
         if sim.poll().is_some() {
             bail!("the simulator exited before writing the hint:\n{}", tail(&dir.join("sim.stderr.log")));
         }
@@ -276,6 +277,9 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         "--json".into(),
     ];
     if args.hint {
+        if no_hint.exists() {
+            bail!("--hint: there is no hint to give: {}", std::fs::read_to_string(&no_hint).unwrap_or_default().trim());
+        }
         daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
     } else {
         daemon_args.extend(["--point-m".into(), format!("{},{},{}", point[0], point[1], point[2])]);

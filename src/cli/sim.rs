@@ -79,7 +79,8 @@ pub struct SimArgs {
     randomize: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
     /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
-    /// before the first frame, for `handeye daemon --hint`.
+    /// before the first frame, for `handeye daemon --hint`. When the target has no such facet
+    /// (a block the grasp rules cannot take), FILE.none says so instead.
     #[arg(long, value_name = "FILE")]
     hint_out: Option<PathBuf>,
     /// Lockstep: before the first frame, wait up to this many seconds for a daemon (a
@@ -130,6 +131,14 @@ pub fn lay_out(scenario: &mut Scenario, file: &std::path::Path, seed: Option<u64
     Ok(())
 }
 
+/// Where `--hint-out PATH` says why there is no hint (`PATH.none`): the target has no facet
+/// an operator could point at.
+pub fn no_hint_path(hint_path: &std::path::Path) -> PathBuf {
+    let mut name = hint_path.as_os_str().to_owned();
+    name.push(".none");
+    PathBuf::from(name)
+}
+
 pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
     let mut scenario = Scenario::load(&args.scenario)?;
@@ -146,16 +155,26 @@ pub fn run(args: SimArgs) -> Result<()> {
         stop_on_success: !args.no_stop_on_success,
     };
     if let Some(path) = &args.hint_out {
-        let (hint, facet) = handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed)?;
-        let text = serde_json::to_string_pretty(&hint)?;
-        // Write then rename, so a reader never sees half a file.
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
-        runner.watch.set_facet(facet);
-        if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
-            let px = runner.face_visible_px(facet.block, facet.face)?;
-            runner.watch.set_facet_baseline(px);
+        match handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed) {
+            Ok((hint, facet)) => {
+                let text = serde_json::to_string_pretty(&hint)?;
+                // Write then rename, so a reader never sees half a file.
+                let tmp = path.with_extension("json.tmp");
+                std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
+                std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
+                runner.watch.set_facet(facet);
+                if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
+                    let px = runner.face_visible_px(facet.block, facet.face)?;
+                    runner.watch.set_facet_baseline(px);
+                }
+            }
+            Err(e) => {
+                // No facet an operator could click (a block the rules cannot grasp): say so
+                // beside the hint's path, so that `handeye run` knows the scene is built; a
+                // run without --hint goes on (its daemon plans, and should refuse).
+                let none = no_hint_path(path);
+                std::fs::write(&none, format!("{e}\n")).with_context(|| format!("writing {}", none.display()))?;
+            }
         }
     }
     let (w, h) = (runner.renderer.width(), runner.renderer.height());
