@@ -161,15 +161,16 @@ mod tests {
         }
         // ... and a layout is drawn once: some seeds keep a block at such a yaw (no re-draw
         // for low contrast), and each yaw is uniform, not pushed towards clear ones.
-        let mut faint_layouts = 0;
+        let mut faint_layouts = Vec::new();
         for seed in 1..=60 {
             let mut s = clutter.clone();
             assert!(s.randomise_layout(seed), "seed {seed}");
             if (0..s.blocks.len()).any(|i| contrast(&s, i, s.blocks[i].yaw_deg) < CLEAR_EDGE) {
-                faint_layouts += 1;
+                faint_layouts.push(seed);
             }
         }
-        assert!(faint_layouts >= 3, "only {faint_layouts} of 60 layouts keep a faint edge: yaws are still re-drawn");
+        eprintln!("clutter3 layouts with an edge under 12 grey levels: {faint_layouts:?}");
+        assert!(faint_layouts.len() >= 3, "only {faint_layouts:?} of 60 layouts keep a faint edge: yaws are still re-drawn");
     }
 
     #[test]
