@@ -47,7 +47,7 @@ mod summary;
 /// A progress bar runs on stderr (one line per finished run when stderr is not a
 /// terminal). Then a table on stdout: per scenario the runs, successes, success rate,
 /// median servo steps (successful runs) and median wall time per run; the failures grouped
-/// by the phase they happened in and their kind (not_converged, no_grasp_site, wrong_target,
+/// by the phase they happened in and their kind (not_converged, no_grasp_site, refused, wrong_target,
 /// ...: the `failure` of `handeye run --json`), each group's runs listed with their reasons
 /// in full; the total wall time.
 ///
