@@ -52,6 +52,13 @@ pub struct RunSummary {
     /// The task's target block.
     #[serde(deserialize_with = "required")]
     pub target_block: Option<String>,
+    /// Whether the target has a grasp the rules allow (the simulator's judge on its true
+    /// geometry); `null` when the simulator reported nothing.
+    #[serde(deserialize_with = "required")]
+    pub target_graspable: Option<bool>,
+    /// Why the target has none, in words; `null` when it has one.
+    #[serde(deserialize_with = "required")]
+    pub target_ungraspable_reason: Option<String>,
     /// The block and face the daemon's target trackers were put on (ground truth).
     #[serde(deserialize_with = "required")]
     pub targeted_block: Option<String>,
@@ -141,6 +148,35 @@ pub struct BatchGroup {
     pub median_run_wall_s: Option<f64>,
     /// The batch's wall time (totals only; `null` per scenario).
     pub wall_s: Option<f64>,
+    /// The runs split by whether the target had a grasp the rules allow (the simulator's
+    /// judge on its true geometry).
+    #[serde(flatten)]
+    pub judged: JudgedTallies,
+}
+
+/// Successes over graspable targets, and refusals, right and wrong (issue 20): a refusal is
+/// a run the daemon ended with `failure.kind = refused`; an attempt is a run that went on
+/// past planning (to acquiring the target or further).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct JudgedTallies {
+    /// Runs whose target has a grasp the rules allow.
+    pub graspable_runs: usize,
+    /// ... of which lifted.
+    pub graspable_successes: usize,
+    /// `graspable_successes / graspable_runs`; `null` without graspable runs.
+    pub graspable_success_rate: Option<f64>,
+    /// Refusals of a graspable target.
+    pub wrong_refusals: usize,
+    /// Runs whose target has no grasp the rules allow.
+    pub ungraspable_runs: usize,
+    /// Refusals of an ungraspable target.
+    pub correct_refusals: usize,
+    /// `correct_refusals / ungraspable_runs`; `null` without ungraspable runs.
+    pub correct_refusal_rate: Option<f64>,
+    /// Ungraspable targets the daemon went for anyway (past planning).
+    pub attempts_on_ungraspable: usize,
+    /// Runs the simulator did not judge (it reported nothing).
+    pub unjudged_runs: usize,
 }
 
 /// Runs that failed in one phase with one kind of failure.
@@ -187,7 +223,7 @@ pub struct RunDetail {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use handeye_daemon::DaemonOutcome;
     use handeye_sim::referee::report::SimReport;
@@ -222,7 +258,8 @@ mod tests {
         assert!(err.contains(&format!("missing field `{field}`")), "{err}");
     }
 
-    fn summary() -> RunSummary {
+    /// A run summary with every field set, for tests of what reads it.
+    pub(crate) fn summary() -> RunSummary {
         RunSummary {
             scenario: "pick_cube".into(),
             success: false,
@@ -232,6 +269,8 @@ mod tests {
             failure: Some(Failure::new("servo", FailureKind::NotConverged, "servo: not converged after 90 s (60 steps)")),
             target_source: Some(TargetSource::Plan),
             target_block: Some("cube".into()),
+            target_graspable: Some(true),
+            target_ungraspable_reason: None,
             targeted_block: Some("cube".into()),
             targeted_face: Some("+x".into()),
             indicated_point_m: [0.36, 0.02, 0.06],
@@ -296,6 +335,7 @@ mod tests {
             median_servo_steps: None,
             median_run_wall_s: Some(13.8),
             wall_s: Some(14.0),
+            judged: JudgedTallies { graspable_runs: 1, graspable_success_rate: Some(0.0), ..JudgedTallies::default() },
         };
         let failure = Failure::new("servo", FailureKind::NotConverged, "servo: not converged");
         let batch = BatchResult {
@@ -307,7 +347,7 @@ mod tests {
         };
         let text = serde_json::to_string(&batch).unwrap();
         assert_eq!(serde_json::from_str::<BatchResult>(&text).unwrap(), batch);
-        for field in ["successes", "failure_list", "failed_runs", "runs_detail", "kind"] {
+        for field in ["successes", "failure_list", "failed_runs", "runs_detail", "kind", "graspable_runs", "correct_refusals", "attempts_on_ungraspable"] {
             renamed_field_fails::<BatchResult>(&text, field);
         }
     }
@@ -318,6 +358,7 @@ mod tests {
         "driver":"commands from handeye/robot/command","max_lift_mm":69.4,"adapter":"llvmpipe","domain":"run-1","commands_rejected":0,
         "success":true,"seed":1,"target":"cube","indicated_point_m":[0.36,0.02,0.06],
         "layout":[{"name":"cube","kind":"cube","size_mm":[40.0,40.0,40.0],"position_m":[0.36,0.02],"yaw_deg":0.0}],
+        "target_graspability":{"graspable":true,"reason":null},
         "daemon":{"phases":[["acquire_gripper",0],["servo",700]],"converged":{"frame":900,"final_plane_error_mm":0.06,"final_angle_error_deg":0.18,
         "plate_offset_mm":0.06,"jaw_plane_offset_mm":0.04,"lateral_error_mm":0.3,"tool_z_mm":80.0},"grasped":null,"stopped_frame":null,
         "stop_reason":null,"first_stop_command_frame":null,"target_hidden_frame":null,"telemetry":1158,
@@ -330,7 +371,7 @@ mod tests {
         let report: SimReport = serde_json::from_str(SIM_JSON).unwrap();
         assert!(report.success);
         assert_eq!(report.daemon.targeted.as_ref().map(|t| t.face.as_str()), Some("+x"));
-        for field in ["success", "target", "verdict", "targeted", "is_task_target", "gripper_update_rate_hz", "grasped", "stop_reason"] {
+        for field in ["success", "target", "verdict", "targeted", "is_task_target", "gripper_update_rate_hz", "grasped", "stop_reason", "target_graspability", "graspable"] {
             renamed_field_fails::<SimReport>(SIM_JSON, field);
         }
         for field in ["success", "max_lift_mm", "daemon"] {

@@ -44,7 +44,9 @@ use super::units::parse_seconds;
 /// failure_reason (in words), failure (typed: phase, kind, detail; the daemon's own when it
 /// gave one, else interrupted (Ctrl-C or --timeout-s), wrong_target, timed_out (the
 /// scenario's time-out), process (a child reported nothing) or not_lifted, from what the
-/// simulator saw), target_source (plan or hint), target_block, targeted_block,
+/// simulator saw), target_source (plan or hint), target_block, target_graspable and
+/// target_ungraspable_reason (the simulator's judge: does the target have a grasp the
+/// thesis's rules allow, on its true geometry; why not, in words), targeted_block,
 /// targeted_face, indicated_point_m, plan_candidates, planner_ms, planning_frames,
 /// gripper_updates_while_planning, gripper_update_rate_hz (per second of simulated time
 /// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
@@ -59,6 +61,7 @@ use super::units::parse_seconds;
 /// Examples:
 ///   handeye run scenarios/clutter3.toml --out out/clutter3
 ///   handeye run scenarios/clutter3.toml --seed 7 --random-layout --json
+///   handeye run scenarios/random.toml --seed 7 --randomize --out out/cell7   # a drawn work cell
 ///   handeye run scenarios/pick_cube.toml --seed 7 --json
 ///   handeye run scenarios/pick_cube_bump.toml --hint --out out/bump
 #[derive(Args)]
@@ -86,6 +89,10 @@ pub struct RunArgs {
     /// with an indicated point, a random target with the point within 15 mm of it.
     #[arg(long, requires = "seed")]
     random_layout: bool,
+    /// With --seed: draw the whole work cell from the scenario's [randomize] ranges (see
+    /// `handeye sim --help` and scenarios/random.toml).
+    #[arg(long, requires = "seed", conflicts_with = "random_layout")]
+    randomize: bool,
     /// Give the daemon the operator hint (the target facet clicked in both views) instead of
     /// letting it plan its own grasp.
     #[arg(long)]
@@ -184,7 +191,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     let temp = args.out.is_none();
     let dir = args.out.clone().unwrap_or_else(|| std::env::temp_dir().join(format!("handeye-run-{}", std::process::id())));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    for stale in ["hint.json", "sim.json", "daemon.json", "run.json"] {
+    for stale in ["hint.json", "hint.json.none", "sim.json", "daemon.json", "run.json"] {
         let _ = std::fs::remove_file(dir.join(stale));
     }
     let result = run_in(&args, &scenario, &dir, start);
@@ -238,23 +245,19 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         if args.random_layout {
             sim_args.push("--random-layout".into());
         }
+        if args.randomize {
+            sim_args.push("--randomize".into());
+        }
     }
     // The indicated point as the simulator will lay the scene out (the same seeded code).
     let mut laid_out = scenario.clone();
-    if let Some(seed) = args.seed {
-        if args.random_layout {
-            if !laid_out.randomise_layout(seed) {
-                bail!("{}: the blocks do not fit a random layout (seed {seed})", args.scenario.display());
-            }
-        } else {
-            laid_out.randomise_target(seed);
-        }
-    }
+    super::sim::lay_out(&mut laid_out, &args.scenario, args.seed, args.random_layout, args.randomize)?;
     let point = laid_out.indicated_point_m();
     let mut sim = spawn("sim", &sim_args, dir)?;
     let deadline = start + Duration::from_secs_f64(args.timeout_s);
     // The hint appears once the simulator has built the scene (before its first frame).
-    while !dir.join("hint.json").exists() {
+    let no_hint = super::sim::no_hint_path(&dir.join("hint.json"));
+    while !dir.join("hint.json").exists() && !no_hint.exists() {
         if sim.poll().is_some() {
             bail!("the simulator exited before writing the hint:\n{}", tail(&dir.join("sim.stderr.log")));
         }
@@ -274,6 +277,9 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         "--json".into(),
     ];
     if args.hint {
+        if no_hint.exists() {
+            bail!("--hint: there is no hint to give: {}", std::fs::read_to_string(&no_hint).unwrap_or_default().trim());
+        }
         daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
     } else {
         daemon_args.extend(["--point-m".into(), format!("{},{},{}", point[0], point[1], point[2])]);
@@ -347,6 +353,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         failure,
         target_source: d.as_ref().and_then(|d| d.task.target_source),
         target_block: v.as_ref().map(|v| v.target.clone()),
+        target_graspable: v.as_ref().map(|v| v.target_graspability.graspable),
+        target_ungraspable_reason: v.as_ref().and_then(|v| v.target_graspability.reason.clone()),
         targeted_block: targeted.map(|t| t.block.clone()),
         targeted_face: targeted.map(|t| t.face.clone()),
         indicated_point_m: point,

@@ -67,15 +67,20 @@ pub struct SimArgs {
     seed: Option<u64>,
     /// With --seed: a random layout of all the scenario's blocks instead (positions in
     /// x 0.27..0.45 m with the whole block inside, y -0.15..0.15 m, at least 60 mm
-    /// between their bounding circles; kinds, sizes and shades as written; any yaw at which
-    /// every edge the cameras see shows by 12 grey levels or more under the scenario's light).
-    /// A task with an indicated point gets a random target and the point within 15 mm of it.
-    /// What `handeye batch` runs.
+    /// between their bounding circles; kinds, sizes and shades as written; any yaw, drawn
+    /// once). A task with an indicated point gets a random target and the point within
+    /// 15 mm of it. What `handeye batch` runs.
     #[arg(long, requires = "seed")]
     random_layout: bool,
+    /// With --seed: draw the whole work cell from the scenario's [randomize] ranges (or the
+    /// defaults): cameras, light, shades, 2-5 blocks of every kind, noise, blur and the
+    /// indicated point (see scenarios/random.toml). What `handeye batch --randomize` runs.
+    #[arg(long, requires = "seed", conflicts_with = "random_layout")]
+    randomize: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
     /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
-    /// before the first frame, for `handeye daemon --hint`.
+    /// before the first frame, for `handeye daemon --hint`. When the target has no such facet
+    /// (a block the grasp rules cannot take), FILE.none says so instead.
     #[arg(long, value_name = "FILE")]
     hint_out: Option<PathBuf>,
     /// Lockstep: before the first frame, wait up to this many seconds for a daemon (a
@@ -109,18 +114,35 @@ pub fn quiet_mesa() {
     }
 }
 
+/// The scenario as a run with `--seed` lays it out: the target moved a little, every block
+/// laid out afresh (`--random-layout`), or a whole work cell drawn (`--randomize`). One
+/// function for `handeye sim` and `handeye run`, which must agree on the indicated point.
+pub fn lay_out(scenario: &mut Scenario, file: &std::path::Path, seed: Option<u64>, random_layout: bool, randomize: bool) -> Result<()> {
+    let Some(seed) = seed else { return Ok(()) };
+    if randomize {
+        scenario.randomise_cell(seed).with_context(|| format!("{}: seed {seed}", file.display()))?;
+    } else if random_layout {
+        if !scenario.randomise_layout(seed) {
+            anyhow::bail!("{}: the blocks do not fit a random layout (seed {seed})", file.display());
+        }
+    } else {
+        scenario.randomise_target(seed);
+    }
+    Ok(())
+}
+
+/// Where `--hint-out PATH` says why there is no hint (`PATH.none`): the target has no facet
+/// an operator could point at.
+pub fn no_hint_path(hint_path: &std::path::Path) -> PathBuf {
+    let mut name = hint_path.as_os_str().to_owned();
+    name.push(".none");
+    PathBuf::from(name)
+}
+
 pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
     let mut scenario = Scenario::load(&args.scenario)?;
-    if let Some(seed) = args.seed {
-        if args.random_layout {
-            if !scenario.randomise_layout(seed) {
-                anyhow::bail!("{}: the blocks do not fit a random layout (seed {seed})", args.scenario.display());
-            }
-        } else {
-            scenario.randomise_target(seed);
-        }
-    }
+    lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize)?;
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
     let adapter = runner.renderer.adapter();
@@ -133,16 +155,26 @@ pub fn run(args: SimArgs) -> Result<()> {
         stop_on_success: !args.no_stop_on_success,
     };
     if let Some(path) = &args.hint_out {
-        let (hint, facet) = handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed)?;
-        let text = serde_json::to_string_pretty(&hint)?;
-        // Write then rename, so a reader never sees half a file.
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
-        runner.watch.set_facet(facet);
-        if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
-            let px = runner.face_visible_px(facet.block, facet.face)?;
-            runner.watch.set_facet_baseline(px);
+        match handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed) {
+            Ok((hint, facet)) => {
+                let text = serde_json::to_string_pretty(&hint)?;
+                // Write then rename, so a reader never sees half a file.
+                let tmp = path.with_extension("json.tmp");
+                std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
+                std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
+                runner.watch.set_facet(facet);
+                if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
+                    let px = runner.face_visible_px(facet.block, facet.face)?;
+                    runner.watch.set_facet_baseline(px);
+                }
+            }
+            Err(e) => {
+                // No facet an operator could click (a block the rules cannot grasp): say so
+                // beside the hint's path, so that `handeye run` knows the scene is built; a
+                // run without --hint goes on (its daemon plans, and should refuse).
+                let none = no_hint_path(path);
+                std::fs::write(&none, format!("{e}\n")).with_context(|| format!("writing {}", none.display()))?;
+            }
         }
     }
     let (w, h) = (runner.renderer.width(), runner.renderer.height());
@@ -203,6 +235,10 @@ pub fn run(args: SimArgs) -> Result<()> {
                 .iter()
                 .map(|b| LaidOutBlock { name: b.name.clone(), kind: b.kind, size_mm: b.size_mm, position_m: b.position_m, yaw_deg: b.yaw_deg })
                 .collect(),
+            target_graspability: handeye_sim::referee::graspable::judge_block(
+                &scenario.blocks[runner.sim.target_index()],
+                &scenario.cameras.iter().map(|c| c.position_m).collect::<Vec<_>>(),
+            ),
             daemon: runner.watch.clone(),
         };
         if let Some(path) = &args.verdict_out {

@@ -28,8 +28,13 @@ pub enum FailureKind {
     GripperNotFound,
     /// The calibration fit was refused or unusable.
     Calibration,
-    /// The planner found no grasp site the rules allow near the indicated point.
+    /// The planner found no grasp site near the indicated point, and no block there to
+    /// refuse (nothing reconstructed near it).
     NoGraspSite,
+    /// The daemon refused the task: the block at the indicated point, as it reconstructed
+    /// it, has no grasp the rules allow (the detail says which rules it fails). Not a
+    /// failure when the block truly has none: `handeye batch` counts it as a refusal.
+    Refused,
     /// The target facet could not be acquired or verified in the images.
     TargetNotAcquired,
     /// The servo could not make a step (geometry unusable) or did not converge in time.
@@ -67,6 +72,7 @@ impl FailureKind {
             Self::GripperNotFound => "gripper_not_found",
             Self::Calibration => "calibration",
             Self::NoGraspSite => "no_grasp_site",
+            Self::Refused => "refused",
             Self::TargetNotAcquired => "target_not_acquired",
             Self::NotConverged => "not_converged",
             Self::RobotRefused => "robot_refused",

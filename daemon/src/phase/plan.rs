@@ -219,10 +219,23 @@ impl PlanPhase {
                 };
                 let summary = out.summary.clone();
                 let target = out.target.clone();
+                let refusal = out.refusal.clone();
                 m.targeting.set_alternatives(out.alternatives.iter().map(target_spec).collect());
                 m.planning.record(summary.clone(), stats);
                 m.reporting.plan(out);
                 let Some(t) = target else {
+                    // A refusal names the rules the pointed block fails, from this plan's own
+                    // facets, so that the user can tell a right refusal from a blind one.
+                    if let Some(why) = refusal {
+                        let elsewhere = summary
+                            .sites
+                            .candidates
+                            .first()
+                            .and_then(|c| c.place.distance_mm)
+                            .map(|d| format!(" (the nearest site, on another block, is {d:.0} mm from the indicated point)"))
+                            .unwrap_or_default();
+                        return Step::fail(FailureKind::Refused, format!("plan: refused: the pointed block has no graspable facet pair: {why}{elsewhere}"));
+                    }
                     if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
                         return Step::fail(FailureKind::NoGraspSite, format!(
                             "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away)",

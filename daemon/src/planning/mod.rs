@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, EdgeRef, FeatureRef, Grasp, GraspConfig, RejectReason};
+use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
@@ -251,6 +251,10 @@ pub struct PlanOutput {
     pub alternatives: Vec<PlannedTarget>,
     /// The images as the planner saw them (masked), for the report.
     pub images: [ImageBuf; 2],
+    /// With no target: why the pointed block (the facets reconstructed near the indicated
+    /// point) has no grasp the rules allow, in words, from this plan's own facets and
+    /// rejections; `None` when nothing was reconstructed near the point.
+    pub refusal: Option<String>,
 }
 
 /// A short name for a rejection reason.
@@ -522,7 +526,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         Err(e) => {
             summary.sites.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
             summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images };
+            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None };
         }
     };
     // No site near the point, or only zero-width ones (the thesis's thin wall; among
@@ -612,8 +616,31 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     };
     let target = chosen.as_ref().map(planned);
     let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
+    let refusal = if target.is_none() { pointed_block_refusal(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
     summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-    PlanOutput { summary, target, alternatives, images: req.images }
+    PlanOutput { summary, target, alternatives, images: req.images, refusal }
+}
+
+/// Why the pointed block has no grasp, in words ([`why_no_grasp`]): the block is the
+/// connected component of the facet whose centre lies nearest the indicated point in plan
+/// view, within `max_distance_m` (without a point, every facet). `None` when no facet is
+/// that near: nothing was seen there, which is not a refusal but a failure to see.
+fn pointed_block_refusal(ps: &PlannedScene, rejected: &[Rejection], indicated: Option<&Vector3<f64>>, config: &GraspConfig, max_distance_m: f64) -> Option<String> {
+    let facets = &ps.scene.facets;
+    let component = match indicated {
+        Some(p) => {
+            let centre = |k: usize| facets[k].polygon_m.iter().sum::<Vector3<f64>>() / facets[k].polygon_m.len().max(1) as f64;
+            let (distance_m, k) = (0..facets.len()).map(|k| ((centre(k).xy() - p.xy()).norm(), k)).min_by(|a, b| a.0.total_cmp(&b.0))?;
+            if distance_m > max_distance_m {
+                return None;
+            }
+            Some(facets[k].component)
+        }
+        None if facets.is_empty() => return None,
+        None => None,
+    };
+    let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
+    Some(why_no_grasp(rejected, name, config))
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::referee::graspable::Graspability;
 use crate::referee::judge::Verdict;
 use crate::referee::watch::DaemonWatch;
 use crate::scenario::BlockKind;
@@ -104,6 +105,9 @@ pub struct SimReport {
     /// The operator's indicated point on the working plane, robot frame, m.
     pub indicated_point_m: [f64; 3],
     pub layout: Vec<LaidOutBlock>,
+    /// Whether the target has a grasp the rules allow, judged on its true geometry as laid
+    /// out ([`crate::referee::graspable`]).
+    pub target_graspability: Graspability,
     /// What the simulator saw of the daemon.
     pub daemon: DaemonWatch,
 }

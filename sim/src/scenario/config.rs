@@ -71,6 +71,9 @@ pub struct Scenario {
     pub success: SuccessRule,
     #[serde(default)]
     pub events: Vec<Event>,
+    /// The ranges `--randomize` draws a whole work cell from (see [`RandomizeConfig`]);
+    /// without the section, the default ranges.
+    pub randomize: Option<RandomizeConfig>,
 }
 
 /// `[physics]`
@@ -308,6 +311,125 @@ impl Event {
             | Self::Occluder { at_s, .. }
             | Self::LightChange { at_s, .. } => *at_s,
         }
+    }
+}
+
+/// `[randomize]`
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RandomizeConfig {
+    /// Distance of each camera from the point both look at, metres.
+    pub camera_distance_m: [f64; 2],
+    /// Angle between the two optical axes (the pair's vergence), degrees.
+    pub vergence_deg: [f64; 2],
+    /// Elevation of the pair above the table plane, as seen from the point they look at,
+    /// degrees.
+    pub elevation_deg: [f64; 2],
+    /// Azimuth of the pair's bisector about the vertical, degrees (0: looking back from +x
+    /// towards the arm, as in the shipped scenarios).
+    pub azimuth_deg: [f64; 2],
+    /// Horizontal field of view of both cameras (one lens for the pair), degrees: sets the
+    /// focal length in pixels for the scenario's resolution.
+    pub hfov_deg: [f64; 2],
+    /// Roll of each camera about its optical axis, degrees.
+    pub roll_deg: [f64; 2],
+    /// How far the point the cameras look at lies from the workspace centre, each of x, y and
+    /// z, metres (nobody aims a camera pair at the exact centre).
+    pub aim_offset_m: f64,
+    /// Elevation of the light's direction above the table, degrees (its azimuth is any).
+    pub light_elevation_deg: [f64; 2],
+    /// Brightness of the directional light.
+    pub light_intensity: [f64; 2],
+    /// Ambient light.
+    pub ambient: [f64; 2],
+    /// Albedo of the table top.
+    pub table_shade: [f64; 2],
+    /// Albedo of a block (one paint per block).
+    pub block_shade: [f64; 2],
+    /// Largest difference of one face's albedo from its block's (paint and wear), ±.
+    pub face_shade_spread: f64,
+    /// Number of blocks, inclusive.
+    pub blocks: [usize; 2],
+    /// Block kinds in play, each equally likely: `cube`, `bar`, `wedge`, `l_block`.
+    pub kinds: Vec<BlockKind>,
+    /// Each side of a block, millimetres: within what the gripper opens (50 mm), so that a
+    /// block's graspability is up to its shape and pose, not its bulk.
+    pub size_mm: [f64; 2],
+    /// Block centres: x range, metres (the whole block inside it).
+    pub region_x_m: [f64; 2],
+    /// Block centres: y range, metres.
+    pub region_y_m: [f64; 2],
+    /// Sensor noise, grey levels (standard deviation).
+    pub noise_sigma: [f64; 2],
+    /// Optical blur, pixels (standard deviation).
+    pub blur_sigma_px: [f64; 2],
+}
+
+impl Default for RandomizeConfig {
+    fn default() -> Self {
+        use BlockKind::{Bar, Cube, LBlock, Wedge};
+        Self {
+            camera_distance_m: [1.2, 1.9],
+            vergence_deg: [14.0, 30.0],
+            elevation_deg: [25.0, 45.0],
+            azimuth_deg: [-15.0, 15.0],
+            hfov_deg: [30.0, 50.0],
+            roll_deg: [-3.0, 3.0],
+            aim_offset_m: 0.03,
+            light_elevation_deg: [15.0, 90.0],
+            light_intensity: [0.4, 0.9],
+            ambient: [0.2, 0.5],
+            table_shade: [0.05, 0.5],
+            block_shade: [0.35, 0.95],
+            face_shade_spread: 0.1,
+            blocks: [2, 5],
+            kinds: vec![Cube, Bar, Wedge, LBlock],
+            size_mm: [20.0, 45.0],
+            region_x_m: [0.27, 0.47],
+            region_y_m: [-0.18, 0.18],
+            noise_sigma: [0.5, 2.5],
+            blur_sigma_px: [0.0, 1.0],
+        }
+    }
+}
+
+impl RandomizeConfig {
+    /// Ranges out of order or out of what a scenario allows: the key and the problem.
+    pub(super) fn check(&self) -> Result<(), (&'static str, String)> {
+        let ranges: [(&'static str, [f64; 2], f64, f64); 17] = [
+            ("camera_distance_m", self.camera_distance_m, 0.3, 5.0),
+            ("vergence_deg", self.vergence_deg, 1.0, 90.0),
+            ("elevation_deg", self.elevation_deg, 5.0, 85.0),
+            ("azimuth_deg", self.azimuth_deg, -60.0, 60.0),
+            ("hfov_deg", self.hfov_deg, 5.0, 120.0),
+            ("roll_deg", self.roll_deg, -30.0, 30.0),
+            ("light_elevation_deg", self.light_elevation_deg, 1.0, 90.0),
+            ("light_intensity", self.light_intensity, 0.0, 2.0),
+            ("ambient", self.ambient, 0.0, 1.0),
+            ("table_shade", self.table_shade, 0.0, 1.0),
+            ("block_shade", self.block_shade, 0.0, 1.0),
+            ("size_mm", self.size_mm, 20.0, 60.0),
+            ("region_x_m", self.region_x_m, -2.0, 2.0),
+            ("region_y_m", self.region_y_m, -2.0, 2.0),
+            ("noise_sigma", self.noise_sigma, 0.0, 50.0),
+            ("blur_sigma_px", self.blur_sigma_px, 0.0, 2.0),
+            ("blocks", [self.blocks[0] as f64, self.blocks[1] as f64], 1.0, 16.0),
+        ];
+        for (key, [lo, hi], min, max) in ranges {
+            if !(lo.is_finite() && hi.is_finite() && min <= lo && lo <= hi && hi <= max) {
+                return Err((key, format!("must be [low, high] with {min} <= low <= high <= {max}")));
+            }
+        }
+        if !(self.aim_offset_m.is_finite() && (0.0..=0.2).contains(&self.aim_offset_m)) {
+            return Err(("aim_offset_m", "must be 0..0.2 m".into()));
+        }
+        if !(self.face_shade_spread.is_finite() && (0.0..=0.5).contains(&self.face_shade_spread)) {
+            return Err(("face_shade_spread", "must be 0..0.5".into()));
+        }
+        if self.kinds.is_empty() {
+            return Err(("kinds", "name at least one block kind".into()));
+        }
+        Ok(())
     }
 }
 

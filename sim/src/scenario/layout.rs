@@ -1,14 +1,9 @@
 //! Seeded random variations of a scenario's layout, for batches over seeds: the target block
 //! moved a little ([`Scenario::randomise_target`]), or every block laid out afresh
-//! ([`Scenario::randomise_layout`]) at yaws whose every visible edge shows under the
-//! scenario's light (judged with the renderer's own shading model,
-//! [`crate::render::shading`]).
+//! ([`Scenario::randomise_layout`]), each yaw drawn once whatever it shows. A whole random
+//! work cell is `cell_draw`'s ([`Scenario::randomise_cell`]).
 
-use glam::DVec3;
-
-use super::config::{BlockConfig, LightConfig, Scenario};
-use crate::cell::geometry::BlockShape;
-use crate::render::shading::Lighting;
+use super::config::{BlockConfig, Scenario};
 use handeye_vision::rng::{SplitMix64, mix64};
 
 impl Scenario {
@@ -43,33 +38,18 @@ impl Scenario {
     pub const LAYOUT_GAP_M: f64 = 0.06;
     /// Largest distance of the indicated point from the target block's centre, metres.
     pub const LAYOUT_POINT_OFFSET_M: f64 = 0.015;
-    /// Least difference in rendered grey (0..1) between the two faces at each of a block's
-    /// edges, and between a face and the table where it stands, that a random yaw must give:
-    /// 12 grey levels of 255 (the sensor noise is 1.5), so that every edge shows.
-    pub const LAYOUT_MIN_EDGE_CONTRAST: f64 = 12.0 / 255.0;
-    /// Yaws drawn per block at most in search of one that shows every edge.
-    pub const LAYOUT_YAW_DRAWS: usize = 32;
-
     /// A seeded random layout of the scenario's blocks (batch runs): uses `seed` for every
     /// random choice, then places every block (kind, size and shades as written) at a random
     /// position in [`Self::LAYOUT_X_M`] x [`Self::LAYOUT_Y_M`] (wholly inside the x range on
     /// the cameras' side) with a random yaw (any angle), at least [`Self::LAYOUT_GAP_M`]
-    /// between any two blocks' bounding circles. A yaw at which an edge of the block that
-    /// the cameras see would not show — its two faces, or a face and the table, rendered
-    /// within [`Self::LAYOUT_MIN_EDGE_CONTRAST`] under the scenario's light — is drawn again
-    /// (the design's "distinct face brightness so edges show": no camera, and no tracker,
-    /// finds an edge of 4 grey levels).
+    /// between any two blocks' bounding circles. Each block's yaw is drawn once: a yaw at
+    /// which an edge renders faintly under the scenario's light is the world the daemon has
+    /// to see, not a reason to draw again (issue 20).
     /// The task stays meaningful: with a named target, that block; with an indicated point,
     /// a random block becomes the target and the point is put within
     /// [`Self::LAYOUT_POINT_OFFSET_M`] of its centre (so it is the nearest block by far).
     /// Returns `false` (layout unchanged but for the seed) when the blocks do not fit.
     pub fn randomise_layout(&mut self, seed: u64) -> bool {
-        self.randomise_layout_drawing(seed, Self::LAYOUT_YAW_DRAWS)
-    }
-
-    /// [`Self::randomise_layout`] with at most `yaw_draws` yaws per block (1: the first
-    /// draw, whatever it hides).
-    fn randomise_layout_drawing(&mut self, seed: u64, yaw_draws: usize) -> bool {
         self.seed = seed;
         let mut rng = SplitMix64::new(mix64(seed ^ 0x4c41_594f_5554));
         let radius = |b: &BlockConfig| 0.5e-3 * b.size_mm[0].hypot(b.size_mm[1]);
@@ -98,26 +78,9 @@ impl Scenario {
             if placed.len() < self.blocks.len() {
                 continue;
             }
-            let (light, table_shade, seed) = (self.light.clone(), self.table.shade, self.seed);
-            let cameras_m: Vec<[f64; 3]> = self.cameras.iter().map(|c| c.position_m).collect();
-            for (index, (b, (p, _))) in self.blocks.iter_mut().zip(&placed).enumerate() {
+            for (b, (p, _)) in self.blocks.iter_mut().zip(&placed) {
                 b.position_m = *p;
-                // A yaw at which two neighbouring faces (or a face and the table) render
-                // alike hides the edge between them from every camera: draw again (the
-                // first draw stands whenever it shows every edge, so such layouts are as
-                // before), keeping the clearest of a few draws.
-                let mut best = (f64::NEG_INFINITY, 0.0);
-                for _ in 0..yaw_draws.max(1) {
-                    let yaw_deg = rng.next_f64() * 360.0 - 180.0;
-                    let contrast = least_edge_contrast(b, index, seed, &light, table_shade, &cameras_m, yaw_deg);
-                    if contrast > best.0 {
-                        best = (contrast, yaw_deg);
-                    }
-                    if contrast >= Self::LAYOUT_MIN_EDGE_CONTRAST {
-                        break;
-                    }
-                }
-                b.yaw_deg = best.1;
+                b.yaw_deg = rng.next_f64() * 360.0 - 180.0;
             }
             if self.task.point_m.is_some() {
                 let t = ((rng.next_f64() * self.blocks.len() as f64) as usize).min(self.blocks.len() - 1);
@@ -131,44 +94,53 @@ impl Scenario {
     }
 }
 
-/// The least rendered contrast (grey 0..1, as the renderer shades a face:
-/// [`Lighting::grey`]) across the edges of block `b` (the `index`-th of a scenario seeded
-/// `seed`) standing at `yaw_deg` that a camera at one of `cameras_m` sees: between the two
-/// faces at an edge where it sees both, and between a face and the table behind or below it
-/// where it sees only that face.
-fn least_edge_contrast(b: &BlockConfig, index: usize, seed: u64, light: &LightConfig, table_shade: f64, cameras_m: &[[f64; 3]], yaw_deg: f64) -> f64 {
-    let shape = BlockShape::new(b.kind, DVec3::from_array(b.size_mm) * 1e-3);
-    let shades = b.face_shades(index, seed);
-    let lighting = Lighting::from_config(light);
-    let (sin, cos) = yaw_deg.to_radians().sin_cos();
-    let centre = DVec3::new(b.position_m[0], b.position_m[1], 0.5e-3 * b.size_mm[2]);
-    // Seen: facing a camera by more than ~3° (a face turned edge-on shows no area).
-    let face = |f: usize| {
-        let n = shape.faces[f].normal;
-        let world = DVec3::new(cos * n.x - sin * n.y, sin * n.x + cos * n.y, n.z);
-        let seen = cameras_m.iter().any(|c| world.dot((DVec3::from_array(*c) - centre).normalize_or_zero()) > 0.05);
-        (seen, lighting.grey(shades.get(f).copied().unwrap_or(0.0), world))
-    };
-    let table = lighting.grey(table_shade, DVec3::Z);
-    let mut least = f64::INFINITY;
-    for e in &shape.edges {
-        let ((seen_a, a), (seen_b, b)) = (face(e.faces[0]), face(e.faces[1]));
-        let contrast = match (seen_a, seen_b) {
-            (true, true) => (a - b).abs(),
-            (true, false) => (a - table).abs(),
-            (false, true) => (b - table).abs(),
-            (false, false) => continue,
-        };
-        least = least.min(contrast);
-    }
-    least
-}
-
 #[cfg(test)]
 mod tests {
     use std::path::Path;
 
+    use glam::DVec3;
+
     use super::*;
+    use crate::cell::geometry::BlockShape;
+    use crate::render::shading::Lighting;
+    use crate::scenario::LightConfig;
+
+    /// Least rendered edge contrast worth calling an edge that shows, grey 0..1 (the
+    /// re-draw threshold before issue 20: 12 grey levels).
+    const CLEAR_EDGE: f64 = 12.0 / 255.0;
+
+    /// The least rendered contrast (grey 0..1, as the renderer shades a face:
+    /// [`Lighting::grey`]) across the edges of block `b` (the `index`-th of a scenario seeded
+    /// `seed`) standing at `yaw_deg` that a camera at one of `cameras_m` sees: between the two
+    /// faces at an edge where it sees both, and between a face and the table behind or below it
+    /// where it sees only that face.
+    fn least_edge_contrast(b: &BlockConfig, index: usize, seed: u64, light: &LightConfig, table_shade: f64, cameras_m: &[[f64; 3]], yaw_deg: f64) -> f64 {
+        let shape = BlockShape::new(b.kind, DVec3::from_array(b.size_mm) * 1e-3);
+        let shades = b.face_shades(index, seed);
+        let lighting = Lighting::from_config(light);
+        let (sin, cos) = yaw_deg.to_radians().sin_cos();
+        let centre = DVec3::new(b.position_m[0], b.position_m[1], 0.5e-3 * b.size_mm[2]);
+        // Seen: facing a camera by more than ~3° (a face turned edge-on shows no area).
+        let face = |f: usize| {
+            let n = shape.faces[f].normal;
+            let world = DVec3::new(cos * n.x - sin * n.y, sin * n.x + cos * n.y, n.z);
+            let seen = cameras_m.iter().any(|c| world.dot((DVec3::from_array(*c) - centre).normalize_or_zero()) > 0.05);
+            (seen, lighting.grey(shades.get(f).copied().unwrap_or(0.0), world))
+        };
+        let table = lighting.grey(table_shade, DVec3::Z);
+        let mut least = f64::INFINITY;
+        for e in &shape.edges {
+            let ((seen_a, a), (seen_b, b)) = (face(e.faces[0]), face(e.faces[1]));
+            let contrast = match (seen_a, seen_b) {
+                (true, true) => (a - b).abs(),
+                (true, false) => (a - table).abs(),
+                (false, true) => (b - table).abs(),
+                (false, false) => continue,
+            };
+            least = least.min(contrast);
+        }
+        least
+    }
 
     const PICK_CUBE: &str = include_str!("../../../scenarios/pick_cube.toml");
 
@@ -177,37 +149,28 @@ mod tests {
     }
 
     #[test]
-    fn random_layouts_show_every_edge_of_every_block() {
+    fn random_layouts_keep_yaws_whose_edges_render_faintly() {
         let clutter = parse(include_str!("../../../scenarios/clutter3.toml"));
         let cameras_m: Vec<[f64; 3]> = clutter.cameras.iter().map(|c| c.position_m).collect();
         let contrast = |s: &Scenario, i: usize, yaw_deg: f64| least_edge_contrast(&s.blocks[i], i, s.seed, &s.light, s.table.shade, &cameras_m, yaw_deg);
-        // The check has something to catch: under clutter3's light each block has yaws at
-        // which two of its neighbouring faces render within the threshold (clutter3 seed 28's
-        // cube showed its front and side faces 4 grey levels apart before the check).
+        // Under clutter3's light each block has yaws at which two of its neighbouring faces
+        // render alike, so faint edges are there to be drawn.
         for i in 0..clutter.blocks.len() {
-            let hidden = (0..360).filter(|d| contrast(&clutter, i, *d as f64) < Scenario::LAYOUT_MIN_EDGE_CONTRAST).count();
-            assert!(hidden > 0 && hidden < 180, "{}: {hidden} of 360 yaws hide an edge", clutter.blocks[i].name);
+            let faint = (0..360).filter(|d| contrast(&clutter, i, *d as f64) < CLEAR_EDGE).count();
+            assert!(faint > 0 && faint < 180, "{}: {faint} of 360 yaws leave an edge faint", clutter.blocks[i].name);
         }
-        let mut redrawn = Vec::new();
+        // ... and a layout is drawn once: some seeds keep a block at such a yaw (no re-draw
+        // for low contrast), and each yaw is uniform, not pushed towards clear ones.
+        let mut faint_layouts = Vec::new();
         for seed in 1..=60 {
             let mut s = clutter.clone();
             assert!(s.randomise_layout(seed), "seed {seed}");
-            for i in 0..s.blocks.len() {
-                let c = contrast(&s, i, s.blocks[i].yaw_deg);
-                assert!(c >= Scenario::LAYOUT_MIN_EDGE_CONTRAST, "seed {seed}: {} at {:.0}° has an edge of {:.1} grey levels", s.blocks[i].name, s.blocks[i].yaw_deg, c * 255.0);
-            }
-            // A layout whose first draws show every edge is the one drawn without the check.
-            let mut plain = clutter.clone();
-            assert!(plain.randomise_layout_drawing(seed, 1));
-            let shows = (0..plain.blocks.len()).all(|i| contrast(&plain, i, plain.blocks[i].yaw_deg) >= Scenario::LAYOUT_MIN_EDGE_CONTRAST);
-            if shows {
-                assert_eq!(format!("{:?}", plain.blocks), format!("{:?}", s.blocks), "seed {seed}");
-            } else {
-                redrawn.push(seed);
+            if (0..s.blocks.len()).any(|i| contrast(&s, i, s.blocks[i].yaw_deg) < CLEAR_EDGE) {
+                faint_layouts.push(seed);
             }
         }
-        eprintln!("clutter3 layouts redrawn for a hidden edge: {redrawn:?}");
-        assert!(!redrawn.is_empty(), "the check changed no layout of 60");
+        eprintln!("clutter3 layouts with an edge under 12 grey levels: {faint_layouts:?}");
+        assert!(faint_layouts.len() >= 3, "only {faint_layouts:?} of 60 layouts keep a faint edge: yaws are still re-drawn");
     }
 
     #[test]

@@ -5,13 +5,16 @@
 //! - `load`, `locate`, `validate`, `error`: reading a file, checking it, and saying where in
 //!   the file a problem is ([`ScenarioError`]: `file:line:column: field.path: message`);
 //! - `shades`: every block face's albedo, as written or seeded;
-//! - `layout`: seeded random layouts for batches, whose yaw check uses the renderer's
-//!   shading model ([`crate::render::shading`]) and the block shapes of the work cell
-//!   ([`crate::cell::geometry`]).
+//! - `layout`: seeded random layouts of the scenario's own blocks, for batches;
+//! - `cell_draw`: whole random work cells from the `[randomize]` ranges (cameras, light,
+//!   shades, blocks, noise), whose physical checks use the renderer's camera model
+//!   ([`crate::render::camera`]), the arm's reach ([`crate::cell::kinematics`]) and the block
+//!   shapes ([`crate::cell::geometry`]).
 //!
 //! Everything else in the crate builds on these types; they build on nothing of it but the
-//! seeded generator.
+//! seeded generator, and the random layouts and cells on the models named above.
 
+mod cell_draw;
 mod config;
 mod error;
 mod layout;
@@ -21,7 +24,8 @@ mod shades;
 mod validate;
 
 pub use config::{
-    ArmConfig, BlockConfig, BlockKind, Cage, CameraConfig, Event, LightConfig, PhysicsConfig, RenderConfig, Scenario, SuccessRule,
+    ArmConfig, BlockConfig, BlockKind, Cage, CameraConfig, Event, LightConfig, PhysicsConfig, RandomizeConfig, RenderConfig, Scenario, SuccessRule,
     TableConfig, Task, s_to_ns,
 };
+pub use cell_draw::CellDrawError;
 pub use error::ScenarioError;

@@ -160,6 +160,10 @@ impl Scenario {
             return Err((p(&[K("success"), K("timeout_s")]), "must be 1..3600 s".into()));
         }
 
+        if let Some(r) = &self.randomize {
+            r.check().map_err(|(f, m)| (p(&[K("randomize"), K(f)]), m))?;
+        }
+
         for (i, e) in self.events.iter().enumerate() {
             let at = |f: &'static str| p(&[K("events"), I(i), K(f)]);
             if !finite_in(e.at_s(), 0.0, 3600.0) {

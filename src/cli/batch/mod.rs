@@ -22,7 +22,8 @@ mod summary;
 
 /// Run many closed-loop grasp scenarios and report how often they succeed.
 ///
-/// Each run is `handeye run SCENARIO --seed S --random-layout --json` (simulator and daemon
+/// Each run is `handeye run SCENARIO --seed S --random-layout --json` (with --randomize:
+/// `--randomize` instead, a whole work cell drawn per seed; see below) (simulator and daemon
 /// as two processes in their own private shared-memory domain): seed S lays the
 /// scenario's blocks out at random (positions in x 0.27..0.45 m with the whole block
 /// inside, y -0.15..0.15 m, any yaw that shows every seen edge, 60 mm apart; a task with an indicated point gets a
@@ -30,15 +31,30 @@ mod summary;
 /// the operator hint), and the simulator judges success from ground truth: the task's
 /// target lifted 50 mm and held 2 s.
 ///
+/// With --randomize each seed draws the whole work cell from the scenario's [randomize]
+/// ranges (default: issue 20's): the camera pair (1.2-1.9 m away, 14-30° vergence, 25-45°
+/// elevation, 30-50° horizontal field of view, a little roll), the light, the table's and
+/// blocks' shades, 2-5 blocks of every kind (cube, bar, wedge, L-block) and size within the
+/// gripper's, their poses, noise and blur, and the indicated point next to a random block.
+/// With no scenario, the built-in scenarios/random.toml.
+///
+/// Every run's target is judged by the simulator on its true geometry: has it a grasp the
+/// thesis's rules allow? The table then also gives the success over graspable targets,
+/// wrong refusals (the daemon refused a graspable target: failure kind `refused`), correct
+/// refusals (it refused an ungraspable one) and attempts on ungraspable targets (it went on
+/// past planning).
+///
 /// A progress bar runs on stderr (one line per finished run when stderr is not a
 /// terminal). Then a table on stdout: per scenario the runs, successes, success rate,
 /// median servo steps (successful runs) and median wall time per run; the failures grouped
-/// by the phase they happened in and their kind (not_converged, no_grasp_site, wrong_target,
+/// by the phase they happened in and their kind (not_converged, no_grasp_site, refused, wrong_target,
 /// ...: the `failure` of `handeye run --json`), each group's runs listed with their reasons
 /// in full; the total wall time.
 ///
 /// With --json, one object instead: runs, successes, success_rate, failures (phase →
-/// kind → count), failure_list (per group: phase, kind, count, runs: run "scenario#seed" and
+/// kind → count), graspable_runs, graspable_successes, graspable_success_rate,
+/// wrong_refusals, ungraspable_runs, correct_refusals, correct_refusal_rate,
+/// attempts_on_ungraspable, unjudged_runs (the same per scenario), failure_list (per group: phase, kind, count, runs: run "scenario#seed" and
 /// its reason), failed_runs (scenario, seed, phase reached, reason in full, failure: phase,
 /// kind, detail), median_servo_steps, median_run_wall_s, wall_s, scenarios (the same per
 /// scenario), daemon_config (the --config file or null), and every run's summary
@@ -52,14 +68,19 @@ mod summary;
 ///
 /// Examples:
 ///   handeye batch scenarios/clutter3.toml --seeds 30
+///   handeye batch --randomize --seeds 50 --json             # randomised work cells
+///   handeye batch --randomize --seeds 20 --first-seed 1000 --out out/cells
+///   handeye batch scenarios/random.toml --randomize --seeds 5   # its own [randomize] ranges
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --config fast.toml   # other daemon settings
 #[derive(Args)]
 #[command(verbatim_doc_comment)]
 pub struct BatchArgs {
-    /// A scenario file (TOML), or a folder: every `*.toml` in it, in name order.
-    scenarios: PathBuf,
+    /// A scenario file (TOML), or a folder: every `*.toml` in it, in name order. With
+    /// --randomize it may be left out: the built-in scenarios/random.toml.
+    #[arg(required_unless_present = "randomize")]
+    scenarios: Option<PathBuf>,
     /// Runs per scenario, seeds --first-seed .. --first-seed + N - 1.
     #[arg(long, value_name = "N")]
     seeds: u64,
@@ -76,6 +97,12 @@ pub struct BatchArgs {
     /// core each in lockstep: more than half the cores only makes every run slower.
     #[arg(long, default_value_t = 1, value_name = "J")]
     jobs: usize,
+    /// Draw a whole work cell per seed (`handeye run --randomize`): cameras, light, shades,
+    /// 2-5 blocks of every kind, noise, blur and the indicated point, from the scenario's
+    /// [randomize] ranges (see scenarios/random.toml and sim/README.md), instead of laying
+    /// out the scenario's own blocks.
+    #[arg(long)]
+    randomize: bool,
     /// Give the daemon the operator hint instead of letting it plan (`handeye run --hint`).
     #[arg(long)]
     hint: bool,
@@ -132,7 +159,7 @@ fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
         job.scenario.display().to_string(),
         "--seed".into(),
         job.seed.to_string(),
-        "--random-layout".into(),
+        if args.randomize { "--randomize" } else { "--random-layout" }.into(),
         "--json".into(),
         "--timeout-s".into(),
         args.timeout_s.to_string(),
@@ -195,7 +222,38 @@ pub fn run(args: BatchArgs) -> Result<()> {
         // A bad file fails here, with its key, rather than in every run.
         handeye_daemon::DaemonConfig::load(config)?;
     }
-    let files = collect_scenarios(&args.scenarios)?;
+    // Without a scenario (--randomize): the built-in random cell, written where the runs can
+    // read it (the report folder, or a temporary one removed at the end).
+    let mut built_in_dir = None;
+    let scenarios = match &args.scenarios {
+        Some(path) => path.clone(),
+        None => {
+            let dir = match &args.out {
+                Some(out) => out.clone(),
+                None => {
+                    let dir = std::env::temp_dir().join(format!("handeye-batch-{}", std::process::id()));
+                    built_in_dir = Some(dir.clone());
+                    dir
+                }
+            };
+            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+            let path = dir.join("random.toml");
+            std::fs::write(&path, RANDOM_SCENARIO).with_context(|| format!("writing {}", path.display()))?;
+            path
+        }
+    };
+    let result = run_batch(&args, &scenarios);
+    if let Some(dir) = built_in_dir {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+    result
+}
+
+/// The scenario `handeye batch --randomize` runs when given none.
+const RANDOM_SCENARIO: &str = include_str!("../../../scenarios/random.toml");
+
+fn run_batch(args: &BatchArgs, scenarios: &Path) -> Result<()> {
+    let files = collect_scenarios(scenarios)?;
     let mut jobs = Vec::new();
     for file in &files {
         let name = scenario_name(file)?;
@@ -224,7 +282,7 @@ pub fn run(args: BatchArgs) -> Result<()> {
     let successes = Arc::new(std::sync::atomic::AtomicU64::new(0));
     std::thread::scope(|scope| {
         for _ in 0..args.jobs {
-            let (queue, results, bar, successes, args) = (queue.clone(), results.clone(), bar.clone(), successes.clone(), &args);
+            let (queue, results, bar, successes, args) = (queue.clone(), results.clone(), bar.clone(), successes.clone(), args);
             scope.spawn(move || loop {
                 if INTERRUPTED.load(Ordering::SeqCst) {
                     break;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use handeye_wire::report::{Failure, FailureKind};
 
-use crate::cli::report::{BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, RunDetail, RunSummary};
+use crate::cli::report::{BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, JudgedTallies, RunDetail, RunSummary};
 
 /// One run to make.
 #[derive(Debug, Clone)]
@@ -37,6 +37,45 @@ impl Outcome {
     pub(super) fn reason(&self) -> Option<&str> {
         self.failure.as_ref().map(|f| f.detail.as_str())
     }
+
+    /// The daemon refused the task (its plan found no grasp on the pointed block).
+    pub(super) fn refused(&self) -> bool {
+        self.failure.as_ref().is_some_and(|f| f.kind == FailureKind::Refused)
+    }
+
+    /// The daemon went for a target: it lifted, or got past planning.
+    pub(super) fn attempted(&self) -> bool {
+        self.success || ["acquire_target", "servo", "grasp", "lift", "done"].contains(&self.phase.as_str())
+    }
+
+    /// The simulator's judge: the target has a grasp the rules allow (`None`: not judged).
+    pub(super) fn graspable(&self) -> Option<bool> {
+        self.summary.as_ref().and_then(|s| s.target_graspable)
+    }
+}
+
+/// Successes over graspable targets, right and wrong refusals, attempts on ungraspable ones.
+pub(super) fn judge_tallies(outcomes: &[&Outcome]) -> JudgedTallies {
+    let mut t = JudgedTallies::default();
+    for o in outcomes {
+        match o.graspable() {
+            Some(true) => {
+                t.graspable_runs += 1;
+                t.graspable_successes += usize::from(o.success);
+                t.wrong_refusals += usize::from(o.refused());
+            }
+            Some(false) => {
+                t.ungraspable_runs += 1;
+                t.correct_refusals += usize::from(o.refused());
+                t.attempts_on_ungraspable += usize::from(o.attempted());
+            }
+            None => t.unjudged_runs += 1,
+        }
+    }
+    let rate = |k: usize, n: usize| (n > 0).then(|| k as f64 / n as f64);
+    t.graspable_success_rate = rate(t.graspable_successes, t.graspable_runs);
+    t.correct_refusal_rate = rate(t.correct_refusals, t.ungraspable_runs);
+    t
 }
 
 pub(super) fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -73,6 +112,7 @@ pub(super) fn group(outcomes: &[&Outcome], wall_s: Option<f64>) -> BatchGroup {
         median_servo_steps: median(outcomes.iter().filter(|o| o.success).filter_map(|o| o.servo_steps).collect()),
         median_run_wall_s: median(outcomes.iter().map(|o| o.wall_s).collect()),
         wall_s,
+        judged: judge_tallies(outcomes),
     }
 }
 
@@ -116,6 +156,29 @@ pub(super) fn table(report: &BatchResult) -> String {
         row(&mut s, name, g);
     }
     row(&mut s, "all", &report.all);
+    let j = &report.all.judged;
+    if j.graspable_runs + j.ungraspable_runs > 0 {
+        let pct = |r: Option<f64>| r.map_or("-".to_string(), |r| format!("{:.0}%", 100.0 * r));
+        let _ = writeln!(
+            s,
+            "\ngraspable targets:   {:>3} runs, {} lifted ({}), {} wrong refusals",
+            j.graspable_runs,
+            j.graspable_successes,
+            pct(j.graspable_success_rate),
+            j.wrong_refusals
+        );
+        let _ = writeln!(
+            s,
+            "ungraspable targets: {:>3} runs, {} correct refusals ({}), {} attempts",
+            j.ungraspable_runs,
+            j.correct_refusals,
+            pct(j.correct_refusal_rate),
+            j.attempts_on_ungraspable
+        );
+        if j.unjudged_runs > 0 {
+            let _ = writeln!(s, "not judged (no simulator report): {} runs", j.unjudged_runs);
+        }
+    }
     if !report.all.failure_list.is_empty() {
         let _ = writeln!(s, "\nfailures by phase and kind:");
         for g in &report.all.failure_list {
@@ -184,6 +247,56 @@ mod tests {
         assert!(t.contains(&format!("c#4: {c4}")), "{t}");
         assert!(t.contains("  1 x servo: tracker_lost (c#6)"), "{t}");
         assert!(t.contains("33%"), "{t}");
+    }
+
+    /// A run whose target the simulator judged graspable or not, and how it ended.
+    fn judged(seed: u64, graspable: bool, end: &str) -> Outcome {
+        let failure = match end {
+            "lifted" => None,
+            "refused" => Some(("plan", FailureKind::Refused, "plan: refused: the pointed block has no graspable facet pair: its top edges slope 34°, more than 30°")),
+            "no_site" => Some(("plan", FailureKind::NoGraspSite, "plan: no grasp site (0 facets; rejected: none found)")),
+            "servo" => Some(("servo", FailureKind::NotConverged, "servo: not converged")),
+            "grasp" => Some(("grasp", FailureKind::GraspLost, "grasp: the jaws closed on nothing")),
+            other => panic!("{other}"),
+        };
+        let mut o = outcome(seed, failure, None);
+        let mut summary = crate::cli::report::tests::summary();
+        summary.target_graspable = Some(graspable);
+        o.summary = Some(summary);
+        o
+    }
+
+    #[test]
+    fn refusals_are_tallied_apart_from_failures_by_what_the_judge_says() {
+        let runs = [
+            judged(1, true, "lifted"),
+            judged(2, true, "lifted"),
+            judged(3, true, "refused"), // a wrong refusal
+            judged(4, true, "servo"),   // an ordinary failure
+            judged(5, false, "refused"), // a correct refusal
+            judged(6, false, "refused"),
+            judged(7, false, "grasp"),   // an attempt on an ungraspable target
+            judged(8, false, "no_site"), // not seen: neither a refusal nor an attempt
+            outcome(9, Some(("run", FailureKind::Process, "handeye run gave no result")), None),
+        ];
+        let r = summarise(&runs, 100.0, None);
+        let j = &r.all.judged;
+        assert_eq!((j.graspable_runs, j.graspable_successes, j.wrong_refusals), (4, 2, 1));
+        assert_eq!(j.graspable_success_rate, Some(0.5));
+        assert_eq!((j.ungraspable_runs, j.correct_refusals, j.attempts_on_ungraspable), (4, 2, 1));
+        assert_eq!(j.correct_refusal_rate, Some(0.5));
+        assert_eq!(j.unjudged_runs, 1);
+        // The old keys stay as they were: successes over every run.
+        assert_eq!((r.all.runs, r.all.successes), (9, 2));
+        let json = serde_json::to_value(&r).unwrap();
+        for key in ["graspable_success_rate", "correct_refusals", "wrong_refusals", "attempts_on_ungraspable", "success_rate"] {
+            assert!(json.get(key).is_some(), "{key} missing from the batch JSON");
+        }
+        assert_eq!(json["scenarios"]["c"]["correct_refusals"], 2);
+        let t = table(&r);
+        assert!(t.contains("graspable targets:     4 runs, 2 lifted (50%), 1 wrong refusals"), "{t}");
+        assert!(t.contains("ungraspable targets:   4 runs, 2 correct refusals (50%), 1 attempts"), "{t}");
+        assert!(t.contains("3 x plan: refused (c#3, c#5, c#6)"), "{t}");
     }
 
     #[test]

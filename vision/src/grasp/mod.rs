@@ -42,11 +42,13 @@
 //! axis (the line the fingers close along), reduced to `(−90°, 90°]` because the gripper is
 //! symmetric: yaw 0 closes the jaws along robot `x`.
 
+pub mod explain;
 mod planview;
 pub mod scene;
 #[cfg(test)]
 mod tests;
 
+pub use explain::why_no_grasp;
 pub use scene::{hypothesise_front_faces, scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};

@@ -1,0 +1,118 @@
+//! Why a block has no grasp, in words a user understands ("its top edges slope 34°"), from
+//! the planner's rejections. One function for the simulator's judge (on true geometry) and
+//! the daemon's refusal (on its own reconstruction), so that the two say the same thing the
+//! same way.
+
+use super::{GraspConfig, RejectReason, Rejection};
+
+/// How far a rejection got through the rules: of a facet's rejections the furthest says best
+/// why it failed. A collision of the zero-width pairing (the thesis's thin wall: a top edge
+/// with itself) says only that the block is no thin wall, so it counts for little.
+fn progress(r: &Rejection) -> u8 {
+    let thin_wall = r.site.is_some_and(|s| s.width_m.abs() < 1e-3);
+    match &r.reason {
+        RejectReason::FingerCollision { .. } | RejectReason::BodyCollision { .. } if thin_wall => 1,
+        RejectReason::FacetNotVertical { .. } => 0,
+        RejectReason::TurnedFromViewer { .. } | RejectReason::NoTopEdge => 1,
+        RejectReason::TopEdgeTooSteep { .. } => 2,
+        RejectReason::NoOverlap | RejectReason::RearInFront { .. } => 3,
+        RejectReason::RearOutOfReach { .. } => 4,
+        RejectReason::TooWide { .. } => 5,
+        RejectReason::FingerCollision { .. } => 6,
+        RejectReason::BodyCollision { .. } | RejectReason::NotHighest => 7,
+    }
+}
+
+/// The number a reason turns on, for choosing the nearest miss among equally far ones.
+fn magnitude(r: &RejectReason) -> f64 {
+    match r {
+        RejectReason::TopEdgeTooSteep { slope_rad } => *slope_rad,
+        RejectReason::RearOutOfReach { drop_m } => drop_m.abs(),
+        RejectReason::TooWide { width_m } => *width_m,
+        _ => 0.0,
+    }
+}
+
+/// Why no grasp was found on the facets that `facet_name` names (`None`: a facet of another
+/// block, left out): per facet the furthest rule it failed (the nearest miss among equals),
+/// each phrase said once, steep top edges first as "its top edges slope N°" (the least
+/// slope: the one that came nearest). E.g. "its top edges slope 34°; behind its +x face the
+/// nearest parallel edge is 27 mm lower, past the fingers' 25 mm".
+pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>, config: &GraspConfig) -> String {
+    let mut per_facet: Vec<(usize, &Rejection)> = Vec::new();
+    for r in rejected {
+        if facet_name(r.facet).is_none() {
+            continue;
+        }
+        match per_facet.iter_mut().find(|(f, _)| *f == r.facet) {
+            None => per_facet.push((r.facet, r)),
+            Some((_, old)) => {
+                let (a, b) = (progress(r), progress(old));
+                if a > b || (a == b && magnitude(&r.reason) < magnitude(&old.reason)) {
+                    *old = r;
+                }
+            }
+        }
+    }
+    let mut phrases: Vec<String> = Vec::new();
+    let mut least_steep: Option<f64> = None;
+    for (facet, r) in per_facet {
+        let name = facet_name(facet).unwrap_or_default();
+        let phrase = match &r.reason {
+            RejectReason::FacetNotVertical { .. } => continue,
+            RejectReason::TopEdgeTooSteep { slope_rad } => {
+                let d = slope_rad.to_degrees();
+                least_steep = Some(least_steep.map_or(d, |s: f64| s.min(d)));
+                continue;
+            }
+            RejectReason::NoTopEdge => format!("its {name} has no top edge"),
+            RejectReason::TurnedFromViewer { angle_rad } => format!("its {name} turns {:.0}° from the cameras", angle_rad.to_degrees()),
+            RejectReason::NoOverlap | RejectReason::RearInFront { .. } => format!("its {name} has no parallel edge behind it"),
+            RejectReason::RearOutOfReach { drop_m } => {
+                format!("behind its {name} the nearest parallel edge is {:.0} mm lower, past the fingers' {:.0} mm", drop_m.abs() * 1e3, config.max_rear_drop_m * 1e3)
+            }
+            RejectReason::TooWide { width_m } => format!("across its {name} it is {:.0} mm wide, more than the jaws' {:.0} mm", width_m * 1e3, config.gripper.max_width_m * 1e3),
+            RejectReason::FingerCollision { .. } => format!("a finger at its {name} would hit something"),
+            RejectReason::BodyCollision { .. } | RejectReason::NotHighest => format!("the gripper's body at its {name} would hit something"),
+        };
+        if !phrases.contains(&phrase) {
+            phrases.push(phrase);
+        }
+    }
+    if let Some(d) = least_steep {
+        phrases.insert(0, format!("its top edges slope {d:.0}°, more than {:.0}°", config.max_edge_slope_rad.to_degrees()));
+    }
+    if phrases.is_empty() {
+        return format!("none of its faces is within {:.0}° of vertical", config.max_facet_tilt_rad.to_degrees());
+    }
+    phrases.join("; ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rejection(facet: usize, reason: RejectReason) -> Rejection {
+        Rejection { facet, front_edge: None, rear_edge: None, site: None, reason }
+    }
+
+    #[test]
+    fn the_furthest_rule_per_facet_is_said_once_and_steep_edges_first() {
+        let c = GraspConfig::default();
+        let rejected = [
+            rejection(0, RejectReason::TopEdgeTooSteep { slope_rad: 36f64.to_radians() }),
+            rejection(1, RejectReason::TopEdgeTooSteep { slope_rad: 34f64.to_radians() }),
+            rejection(2, RejectReason::TopEdgeTooSteep { slope_rad: 5f64.to_radians() }),
+            rejection(2, RejectReason::RearOutOfReach { drop_m: 0.027 }),
+            rejection(3, RejectReason::FacetNotVertical { tilt_rad: 1.0 }),
+            rejection(4, RejectReason::TooWide { width_m: 0.07 }),
+        ];
+        let name = |f: usize| (f != 4).then(|| format!("face {f}"));
+        assert_eq!(
+            why_no_grasp(&rejected, name, &c),
+            "its top edges slope 34°, more than 30°; behind its face 2 the nearest parallel edge is 27 mm lower, past the fingers' 25 mm"
+        );
+        assert_eq!(why_no_grasp(&rejected[3..4], |_| Some("x".into()), &c), "behind its x the nearest parallel edge is 27 mm lower, past the fingers' 25 mm");
+        assert_eq!(why_no_grasp(&rejected[4..5], |_| Some("x".into()), &c), "none of its faces is within 20° of vertical");
+    }
+}
