@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::report::RunSummary;
 use shard::{BatchFile, BatchSpec, ScenarioSpec, Shard};
-use summary::{summarise, table, Job, Outcome};
+use summary::{summarise, Job, Outcome};
 use super::units::parse_seconds;
 
 mod merge;
