@@ -63,11 +63,17 @@ pub struct RunTiming {
     /// After `done`, keep answering frames (holding) for this long before exiting, s of frames;
     /// the run also ends when the camera stream goes away.
     pub done_hold_s: f64,
+    /// Lockstep only: when a worker result (gripper location, calibration fit, plan) is due
+    /// but not in yet, hold the frame's answer up to this long for it, ms. A lockstep camera
+    /// waits for the answer anyway, so a loaded machine then gives the same run as a quiet
+    /// one instead of moving on a few frames later. 0 (the default): never wait, as with
+    /// real cameras, whose frames do not wait for the loop. `handeye run` sets it.
+    pub worker_wait_ms: u64,
 }
 
 impl Default for RunTiming {
     fn default() -> Self {
-        Self { frame_rate_hz: 30.0, deadline_us: 1000, stale_frame_ms: 100, start_timeout_s: 60.0, done_hold_s: 4.0 }
+        Self { frame_rate_hz: 30.0, deadline_us: 1000, stale_frame_ms: 100, start_timeout_s: 60.0, done_hold_s: 4.0, worker_wait_ms: 0 }
     }
 }
 
@@ -859,6 +865,7 @@ mod tests {
             "stale_frame_ms",
             "start_timeout_s",
             "done_hold_s",
+            "worker_wait_ms",
             "gripper.plate_corners_m",
             "gripper.marks_m",
             "gripper.reference_m",

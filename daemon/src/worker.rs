@@ -17,6 +17,7 @@
 //! ```
 
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 use crossbeam::channel::{bounded, Receiver, Sender, TryRecvError, TrySendError};
 
@@ -27,6 +28,8 @@ pub struct Worker<J: Send + 'static, R: Send + 'static> {
     submitted: u64,
     received: u64,
     handle: Option<JoinHandle<()>>,
+    /// How long a caller whose result is due may wait for it (zero: never).
+    due_wait: Duration,
 }
 
 impl<J: Send + 'static, R: Send + 'static> Worker<J, R> {
@@ -42,7 +45,7 @@ impl<J: Send + 'static, R: Send + 'static> Worker<J, R> {
                 }
             }
         })?;
-        Ok(Self { jobs: Some(jobs), results, submitted: 0, received: 0, handle: Some(handle) })
+        Ok(Self { jobs: Some(jobs), results, submitted: 0, received: 0, handle: Some(handle), due_wait: Duration::ZERO })
     }
 
     /// Queues `job` without waiting; gives it back when the queue is full (or the thread died).
@@ -72,6 +75,24 @@ impl<J: Send + 'static, R: Send + 'static> Worker<J, R> {
             }
             Err(TryRecvError::Empty | TryRecvError::Disconnected) => None,
         }
+    }
+
+    /// The next finished result, waiting up to `timeout` for it. Only for a loop that may
+    /// block (lockstep, see [`Self::due_wait`]).
+    pub fn wait_result(&mut self, timeout: Duration) -> Option<R> {
+        let r = self.results.recv_timeout(timeout).ok()?;
+        self.received += 1;
+        Some(r)
+    }
+
+    /// How long a caller whose result is due may block for it (`timing.worker_wait_ms`;
+    /// zero: never).
+    pub fn due_wait(&self) -> Duration {
+        self.due_wait
+    }
+
+    pub fn set_due_wait(&mut self, wait: Duration) {
+        self.due_wait = wait;
     }
 
     /// Jobs submitted whose results have not been collected yet.

@@ -220,6 +220,9 @@ pub struct RunDetail {
     pub seed: u64,
     #[serde(deserialize_with = "required")]
     pub summary: Option<RunSummary>,
+    /// The run's wall time as the batch counts it (the summary's, or how long `handeye run`
+    /// took when it printed none), s: what `handeye batch merge` needs for the medians.
+    pub wall_s: f64,
 }
 
 #[cfg(test)]
@@ -342,7 +345,7 @@ pub(crate) mod tests {
             all: group.clone(),
             scenarios: BTreeMap::from([("pick_cube".to_string(), BatchGroup { wall_s: None, ..group })]),
             failed_runs: vec![FailedRun { scenario: "pick_cube".into(), seed: 1, phase: "servo".into(), reason: failure.detail.clone(), failure }],
-            runs_detail: vec![RunDetail { scenario: "pick_cube".into(), seed: 1, summary: Some(summary()) }],
+            runs_detail: vec![RunDetail { scenario: "pick_cube".into(), seed: 1, summary: Some(summary()), wall_s: 13.8 }],
             daemon_config: None,
         };
         let text = serde_json::to_string(&batch).unwrap();

@@ -210,6 +210,10 @@ pub fn run(args: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// How long the daemon of a run may hold a frame's answer for a due worker result, ms
+/// (`timing.worker_wait_ms`); the simulator waits twice that for an answer.
+const WORKER_WAIT_MS: u64 = 5000;
+
 fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Result<RunSummary> {
     let mut config = match &args.config {
         Some(p) => DaemonConfig::load(p)?,
@@ -222,6 +226,10 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     // 2-core machine with other builds running). A simulator that is gone is still
     // noticed within ~100 ms by the stream's liveness check.
     config.timing.stale_frame_ms = config.timing.stale_frame_ms.max(5000);
+    // For the same reason a worker result that is due is waited for (up to 5 s, within the
+    // simulator's reply time-out below) rather than taken a few frames later than on a quiet
+    // machine: the same seed gives the same run under any load.
+    config.timing.worker_wait_ms = config.timing.worker_wait_ms.max(WORKER_WAIT_MS);
     config.validate(&dir.join("daemon.toml"))?;
     std::fs::write(dir.join("daemon.toml"), config.to_toml())?;
     let domain = args.domain.clone().unwrap_or_else(|| Domain::unique("run"));
@@ -238,6 +246,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         s(&dir.join("sim.json")),
         "--wait-daemon-s".into(),
         "60".into(),
+        "--reply-timeout-s".into(),
+        (2 * WORKER_WAIT_MS / 1000).to_string(),
         "--json".into(),
     ];
     if let Some(seed) = args.seed {

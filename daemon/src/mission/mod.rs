@@ -41,11 +41,13 @@ impl Mission {
     pub fn new(cfg: DaemonConfig, hint: Option<&OperatorHint>) -> std::io::Result<Self> {
         let plate = PlateTemplate::new(&cfg.gripper);
         let servo = ServoRecord::new(cfg.servo.convergence.max_steps);
+        let mut worker = spawn_worker()?;
+        worker.set_due_wait(std::time::Duration::from_millis(cfg.timing.worker_wait_ms));
         Ok(Self {
             cfg,
             plate,
             trackers: StereoTrackerSet::new(),
-            worker: spawn_worker()?,
+            worker,
             targeting: Targeting::new(hint),
             calibration: CalibrationRecord::default(),
             servo,

@@ -5,6 +5,8 @@
 //! A result is taken no earlier than [`WORKER_DELAY_FRAMES`] after submission, on the first
 //! frame at or after that when it is there: a fixed pipeline delay keeps lockstep runs
 //! repeatable, the worker's wall-clock speed never decides on which frame the loop moves on.
+//! When the result is due but not there (a loaded machine), a lockstep daemon
+//! (`timing.worker_wait_ms`) waits for it on that frame, so that it still does not.
 
 use crossbeam::channel::{bounded, Receiver};
 
@@ -67,12 +69,21 @@ impl<T: Send + 'static> PendingJob<T> {
     }
 
     /// The result, on frame `frame_index`: `None` before [`WORKER_DELAY_FRAMES`] have passed
-    /// since submission, or while the worker is still at it.
+    /// since submission, or while the worker is still at it (after waiting up to the worker's
+    /// [`due_wait`](crate::worker::Worker::due_wait) for it).
     pub fn poll(&mut self, worker: &mut JobWorker, frame_index: u64) -> Option<T> {
         if frame_index < self.submitted_frame + WORKER_DELAY_FRAMES {
             return None;
         }
         self.collect(worker);
+        if self.collected.is_none()
+            && !worker.due_wait().is_zero()
+            && let Ok(value) = self.reply.recv_timeout(worker.due_wait())
+        {
+            self.collected = Some(value);
+            // The worker reports the job done just after the job sent its value.
+            let _ = worker.wait_result(worker.due_wait());
+        }
         self.collected.take()
     }
 }
@@ -92,6 +103,28 @@ mod tests {
         assert!(worker.busy(), "not collected before it is due");
         assert_eq!(job.poll(&mut worker, 10 + WORKER_DELAY_FRAMES), Some(42));
         assert!(!worker.busy());
+    }
+
+    #[test]
+    fn a_lockstep_loop_waits_for_a_late_result_on_the_frame_it_is_due() {
+        let mut worker = spawn_worker().unwrap();
+        worker.set_due_wait(std::time::Duration::from_secs(5));
+        let mut job = PendingJob::submit(&mut worker, 0, || {
+            std::thread::sleep(std::time::Duration::from_millis(200));
+            7
+        })
+        .unwrap();
+        // Due, still computing: waited for, not put off to a later frame.
+        assert_eq!(job.poll(&mut worker, WORKER_DELAY_FRAMES), Some(7));
+        assert!(!worker.busy());
+        // Without the wait the same late result is not there on its frame.
+        let mut worker = spawn_worker().unwrap();
+        let mut job = PendingJob::submit(&mut worker, 0, || {
+            std::thread::sleep(std::time::Duration::from_millis(200));
+            7
+        })
+        .unwrap();
+        assert_eq!(job.poll(&mut worker, WORKER_DELAY_FRAMES), None);
     }
 
     #[test]

@@ -9,15 +9,18 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, Subcommand};
 use handeye_wire::report::{Failure, FailureKind};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::report::RunSummary;
-use summary::{summarise, table, Job, Outcome};
+use shard::{BatchFile, BatchSpec, ScenarioSpec, Shard};
+use summary::{summarise, Job, Outcome};
 use super::units::parse_seconds;
 
+mod merge;
 mod pages;
+mod shard;
 mod summary;
 
 /// Run many closed-loop grasp scenarios and report how often they succeed.
@@ -66,6 +69,19 @@ mod summary;
 /// convergence plot, the JSONs and logs) and an index.html page showing them; DIR/batch.json
 /// holds the --json object.
 ///
+/// The object (and batch.json) also says which batch it is, under `batch`: the scenarios
+/// (name, file, a hash of the file), the whole seed list, the shard (null: all of it) and the
+/// `handeye run` flags every run got, so that shards can be checked and merged; each run's
+/// entry in runs_detail has its wall_s.
+///
+/// With --shard K/N, only the K-th of N shares of the seeds runs: the seeds at positions
+/// K-1, K-1+N, K-1+2N, ... of the list (--shard 2/3 --seeds 7 runs seeds 2 and 5), for every
+/// scenario. N shards balance to within one seed and together run every seed once. Give
+/// each shard its own --out DIR; `handeye batch merge DIR...` then reads their batch.json
+/// files and writes the table, batch.json and index.html the unsharded batch would have
+/// (see `handeye batch merge --help`, and README "Batches on a cluster" for Slurm and
+/// Kubernetes).
+///
 /// Examples:
 ///   handeye batch scenarios/clutter3.toml --seeds 30
 ///   handeye batch --randomize --seeds 50 --json             # randomised work cells
@@ -74,16 +90,23 @@ mod summary;
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --config fast.toml   # other daemon settings
+///   handeye batch scenarios/clutter3.toml --seeds 1000 --shard 3/50 --out shared/shard-3
+///   handeye batch merge shared/shard-* --out shared/batch
 #[derive(Args)]
-#[command(verbatim_doc_comment)]
+#[command(verbatim_doc_comment, args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct BatchArgs {
+    #[command(subcommand)]
+    command: Option<BatchCommand>,
     /// A scenario file (TOML), or a folder: every `*.toml` in it, in name order. With
     /// --randomize it may be left out: the built-in scenarios/random.toml.
     #[arg(required_unless_present = "randomize")]
     scenarios: Option<PathBuf>,
     /// Runs per scenario, seeds --first-seed .. --first-seed + N - 1.
-    #[arg(long, value_name = "N")]
-    seeds: u64,
+    #[arg(long, value_name = "N", required = true)]
+    seeds: Option<u64>,
+    /// Run only the K-th of N shares of the seeds (K from 1 to N; see above).
+    #[arg(long, value_name = "K/N", value_parser = shard::parse_shard)]
+    shard: Option<Shard>,
     /// The first seed.
     #[arg(long, default_value_t = 1, value_name = "S")]
     first_seed: u64,
@@ -113,6 +136,11 @@ pub struct BatchArgs {
     /// tracker settings over the same layouts. Checked before the first run starts.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum BatchCommand {
+    Merge(merge::MergeArgs),
 }
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
@@ -151,25 +179,25 @@ fn tail(text: &str, lines: usize) -> String {
     l[l.len().saturating_sub(lines)..].join(" | ")
 }
 
-fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
-    let start = Instant::now();
-    let exe = std::env::current_exe();
-    let mut cmd_args: Vec<String> = vec![
-        "run".into(),
-        job.scenario.display().to_string(),
-        "--seed".into(),
-        job.seed.to_string(),
-        if args.randomize { "--randomize" } else { "--random-layout" }.into(),
-        "--json".into(),
-        "--timeout-s".into(),
-        args.timeout_s.to_string(),
-    ];
+/// The `handeye run` flags every run of the batch gets (besides its scenario, seed and
+/// report folder); shards of one batch must agree on them.
+fn run_flags(args: &BatchArgs) -> Vec<String> {
+    let layout = if args.randomize { "--randomize" } else { "--random-layout" };
+    let mut flags: Vec<String> = vec![layout.into(), "--json".into(), "--timeout-s".into(), args.timeout_s.to_string()];
     if args.hint {
-        cmd_args.push("--hint".into());
+        flags.push("--hint".into());
     }
     if let Some(config) = &args.config {
-        cmd_args.extend(["--config".into(), config.display().to_string()]);
+        flags.extend(["--config".into(), config.display().to_string()]);
     }
+    flags
+}
+
+fn run_one(job: &Job, flags: &[String]) -> Outcome {
+    let start = Instant::now();
+    let exe = std::env::current_exe();
+    let mut cmd_args: Vec<String> = vec!["run".into(), job.scenario.display().to_string(), "--seed".into(), job.seed.to_string()];
+    cmd_args.extend(flags.iter().cloned());
     if let Some(out) = &job.out {
         cmd_args.extend(["--out".into(), out.display().to_string()]);
     }
@@ -212,7 +240,17 @@ fn run_one(job: &Job, args: &BatchArgs) -> Outcome {
 }
 
 pub fn run(args: BatchArgs) -> Result<()> {
-    if args.seeds == 0 {
+    if let Some(BatchCommand::Merge(merge)) = args.command {
+        return merge::run(merge);
+    }
+    // clap requires --seeds, and a scenario unless --randomize, without a subcommand.
+    let (scenarios, Some(seeds)) = (args.scenarios.clone(), args.seeds) else {
+        bail!("handeye batch needs --seeds and a scenario (or --randomize) (see handeye batch --help)");
+    };
+    if scenarios.is_none() && !args.randomize {
+        bail!("handeye batch needs a scenario unless --randomize (see handeye batch --help)");
+    }
+    if seeds == 0 {
         bail!("--seeds must be at least 1");
     }
     if args.jobs == 0 {
@@ -225,7 +263,7 @@ pub fn run(args: BatchArgs) -> Result<()> {
     // Without a scenario (--randomize): the built-in random cell, written where the runs can
     // read it (the report folder, or a temporary one removed at the end).
     let mut built_in_dir = None;
-    let scenarios = match &args.scenarios {
+    let scenarios = match &scenarios {
         Some(path) => path.clone(),
         None => {
             let dir = match &args.out {
@@ -242,7 +280,7 @@ pub fn run(args: BatchArgs) -> Result<()> {
             path
         }
     };
-    let result = run_batch(&args, &scenarios);
+    let result = run_batch(&args, &scenarios, seeds);
     if let Some(dir) = built_in_dir {
         let _ = std::fs::remove_dir_all(dir);
     }
@@ -252,15 +290,22 @@ pub fn run(args: BatchArgs) -> Result<()> {
 /// The scenario `handeye batch --randomize` runs when given none.
 const RANDOM_SCENARIO: &str = include_str!("../../../scenarios/random.toml");
 
-fn run_batch(args: &BatchArgs, scenarios: &Path) -> Result<()> {
+fn run_batch(args: &BatchArgs, scenarios: &Path, seeds: u64) -> Result<()> {
     let files = collect_scenarios(scenarios)?;
+    let flags = run_flags(args);
+    let mut spec = BatchSpec { scenarios: Vec::new(), seeds: (args.first_seed..args.first_seed + seeds).collect(), shard: args.shard, run_flags: flags.clone() };
     let mut jobs = Vec::new();
     for file in &files {
         let name = scenario_name(file)?;
-        for seed in args.first_seed..args.first_seed + args.seeds {
+        for seed in spec.own_seeds() {
             let out = args.out.as_ref().map(|d| d.join(&name).join(format!("seed-{seed}")));
             jobs.push(Job { scenario: file.clone(), name: name.clone(), seed, out });
         }
+        spec.scenarios.push(ScenarioSpec::read(file, name)?);
+    }
+    if jobs.is_empty() {
+        let shard = args.shard.map(|s| s.to_string()).unwrap_or_default();
+        bail!("--shard {shard}: this shard has no seeds (--seeds {seeds} gives fewer seeds than shards)");
     }
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
@@ -282,13 +327,13 @@ fn run_batch(args: &BatchArgs, scenarios: &Path) -> Result<()> {
     let successes = Arc::new(std::sync::atomic::AtomicU64::new(0));
     std::thread::scope(|scope| {
         for _ in 0..args.jobs {
-            let (queue, results, bar, successes, args) = (queue.clone(), results.clone(), bar.clone(), successes.clone(), args);
+            let (queue, results, bar, successes, flags) = (queue.clone(), results.clone(), bar.clone(), successes.clone(), &flags);
             scope.spawn(move || loop {
                 if INTERRUPTED.load(Ordering::SeqCst) {
                     break;
                 }
                 let Some((i, job)) = queue.lock().ok().and_then(|mut q| q.pop()) else { break };
-                let o = run_one(&job, args);
+                let o = run_one(&job, flags);
                 if o.success {
                     successes.fetch_add(1, Ordering::SeqCst);
                 }
@@ -319,18 +364,7 @@ fn run_batch(args: &BatchArgs, scenarios: &Path) -> Result<()> {
     let outcomes: Vec<Outcome> = outcomes.into_iter().map(|(_, o)| o).collect();
     let wall_s = start.elapsed().as_secs_f64();
     let report = summarise(&outcomes, wall_s, args.config.as_ref().map(|c| c.display().to_string()));
-    if let Some(out) = &args.out {
-        std::fs::write(out.join("batch.json"), serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", out.join("batch.json").display()))?;
-        pages::write_pages(out, &outcomes, &report)?;
-    }
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print!("{}", table(&report));
-        if let Some(out) = &args.out {
-            println!("report: {}", out.join("index.html").display());
-        }
-    }
+    pages::write_report(&BatchFile { batch: spec, result: report }, &outcomes, args.out.as_deref(), args.json)?;
     if INTERRUPTED.load(Ordering::SeqCst) {
         eprintln!("batch: interrupted after {} of the runs", outcomes.len());
     }

@@ -1,10 +1,13 @@
-//! `handeye batch --out DIR`: the report pages, DIR/index.html (the table, a row per run)
-//! and DIR/<scenario>/seed-<S>/index.html (a run's plan, convergence plot and key moments).
+//! A batch's result as it leaves the process (the same for a batch and for a merge of its
+//! shards): the JSON or the table on stdout, and with `--out DIR` DIR/batch.json and the
+//! report pages, DIR/index.html (the table, a row per run) and DIR/<scenario>/seed-<S>/index.html
+//! (a run's plan, convergence plot and key moments).
 
 use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use super::shard::BatchFile;
 use super::summary::{table, Outcome};
 use crate::cli::report::{as_json, BatchResult, RunSummary};
 
@@ -118,4 +121,23 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
         let _ = write!(page, "<p>{}</p><img src=\"{png}\">", esc(&caption(png)));
     }
     std::fs::write(dir.join("index.html"), page).with_context(|| format!("writing {}", dir.join("index.html").display()))
+}
+
+/// The batch's result: DIR/batch.json and the pages with `out`, then the JSON or the table on
+/// stdout. The same for a batch and for a merge of its shards.
+pub(super) fn write_report(file: &BatchFile, outcomes: &[Outcome], out: Option<&Path>, json: bool) -> Result<()> {
+    if let Some(out) = out {
+        let path = out.join("batch.json");
+        std::fs::write(&path, serde_json::to_string_pretty(file)?).with_context(|| format!("writing {}", path.display()))?;
+        write_pages(out, outcomes, &file.result)?;
+    }
+    if json {
+        println!("{}", serde_json::to_string(file)?);
+    } else {
+        print!("{}", table(&file.result));
+        if let Some(out) = out {
+            println!("report: {}", out.join("index.html").display());
+        }
+    }
+    Ok(())
 }

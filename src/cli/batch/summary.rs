@@ -130,7 +130,7 @@ pub(super) fn summarise(outcomes: &[Outcome], wall_s: f64, daemon_config: Option
                 Some(FailedRun { scenario: o.job.name.clone(), seed: o.job.seed, phase: o.phase.clone(), reason: failure.detail.clone(), failure })
             })
             .collect(),
-        runs_detail: outcomes.iter().map(|o| RunDetail { scenario: o.job.name.clone(), seed: o.job.seed, summary: o.summary.clone() }).collect(),
+        runs_detail: outcomes.iter().map(|o| RunDetail { scenario: o.job.name.clone(), seed: o.job.seed, summary: o.summary.clone(), wall_s: o.wall_s }).collect(),
         daemon_config,
     }
 }
