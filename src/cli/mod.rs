@@ -15,6 +15,7 @@ pub mod report;
 pub mod run;
 pub mod sim;
 pub mod snapshot;
+pub mod stats;
 pub mod telemetry;
 pub mod track;
 pub mod units;

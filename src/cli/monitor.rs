@@ -11,6 +11,7 @@ use handeye_wire::{monotonic_ns, WireNode};
 use serde_json::json;
 
 use super::domain::DomainArgs;
+use super::stats::percentile_sorted as percentile;
 use super::units::parse_seconds;
 
 const EXAMPLES: &str = "\
@@ -100,15 +101,6 @@ struct Event {
     last_frame_id: Option<u64>,
     /// Valid frames received before the event.
     frames: u64,
-}
-
-/// Nearest-rank percentile of sorted values.
-fn percentile(sorted: &[u64], p: f64) -> Option<u64> {
-    if sorted.is_empty() {
-        return None;
-    }
-    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
-    Some(sorted[rank.clamp(1, sorted.len()) - 1])
 }
 
 pub fn run(args: MonitorArgs) -> Result<()> {
@@ -282,16 +274,6 @@ fn progress_line(stats: &StereoStats, latencies: &[u64], fps: f64) -> String {
 mod tests {
     use super::*;
     use handeye_wire::stereo::StereoReject;
-
-    #[test]
-    fn nearest_rank_percentiles() {
-        let v: Vec<u64> = (1..=100).collect();
-        assert_eq!(percentile(&v, 50.0), Some(50));
-        assert_eq!(percentile(&v, 99.0), Some(99));
-        assert_eq!(percentile(&v, 100.0), Some(100));
-        assert_eq!(percentile(&[7], 99.0), Some(7));
-        assert_eq!(percentile(&[], 50.0), None);
-    }
 
     #[test]
     fn fps_counts_intervals_between_first_and_last_frame() {

@@ -76,13 +76,9 @@ pub fn record(values: &mut Vec<u64>, value: u64) {
 
 /// Nearest-rank percentile of unsorted values (sorted on a copy).
 pub fn percentile(values: &[u64], p: f64) -> Option<u64> {
-    if values.is_empty() {
-        return None;
-    }
     let mut v = values.to_vec();
     v.sort_unstable();
-    let rank = ((p / 100.0) * v.len() as f64).ceil() as usize;
-    Some(v[rank.clamp(1, v.len()) - 1])
+    crate::cli::stats::percentile_sorted(&v, p)
 }
 
 impl CameraStats {

@@ -233,13 +233,7 @@ impl StereoPublisher {
     ///
     /// `fill` must write every pixel: bytes it skips keep whatever an earlier frame left there.
     pub fn publish(&mut self, capture_time_ns: u64, fill: impl FnOnce(&mut [u8])) -> Result<u64, PublishError> {
-        let frame_id = self.next_frame_id;
-        let mut header = self.geometry.header();
-        header.frame_id = frame_id;
-        header.capture_time_ns = capture_time_ns;
-        self.send(header, self.layout.payload_len, fill)?;
-        self.next_frame_id += 1;
-        Ok(frame_id)
+        self.publish_with_id(self.next_frame_id, capture_time_ns, fill)
     }
 
     /// Like [`StereoPublisher::publish`], with the frame id chosen by the caller: a replay of
