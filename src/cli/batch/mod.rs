@@ -29,7 +29,7 @@ mod summary;
 /// `--randomize` instead, a whole work cell drawn per seed; see below) (simulator and daemon
 /// as two processes in their own private shared-memory domain): seed S lays the
 /// scenario's blocks out at random (positions in x 0.27..0.45 m with the whole block
-/// inside, y -0.15..0.15 m, any yaw that shows every seen edge, 60 mm apart; a task with an indicated point gets a
+/// inside, y -0.15..0.15 m, any yaw, drawn once (a faint edge is not drawn again), 60 mm apart; a task with an indicated point gets a
 /// random target with the point within 15 mm of it) and reseeds the sensor noise. The daemon plans its own grasp (with --hint:
 /// the operator hint), and the simulator judges success from ground truth: the task's
 /// target lifted 50 mm and held 2 s.
