@@ -97,13 +97,13 @@ mod tests {
         f.tick();
         let mid = f.tick();
         let q_mid = ik(ToolPose { pos_m: DVec3::new(0.32, 0.0, 0.2), yaw_rad: 0.1 }).unwrap();
-        assert!(mid.q_rad.iter().zip(q_mid).all(|(a, b)| (a - b).abs() < 1e-9), "{:?} vs {q_mid:?}", mid.q_rad);
-        assert!((mid.finger_m[0] - 0.025).abs() < 1e-9, "{mid:?}");
+        assert!(mid.q_rad.iter().zip(q_mid).all(|(a, b)| (a - b).abs() < 1e-6), "{:?} vs {q_mid:?}", mid.q_rad);
+        assert!((mid.finger_m[0] - 0.025).abs() < 1e-6, "{mid:?}");
         f.tick();
         let end = f.tick();
         let q_end = ik(ToolPose { pos_m: DVec3::new(0.34, 0.0, 0.2), yaw_rad: 0.2 }).unwrap();
-        assert!(end.q_rad.iter().zip(q_end).all(|(a, b)| (a - b).abs() < 1e-9), "{:?} vs {q_end:?}", end.q_rad);
-        assert!((end.finger_m[0] - 0.01).abs() < 1e-9);
+        assert!(end.q_rad.iter().zip(q_end).all(|(a, b)| (a - b).abs() < 1e-6), "{:?} vs {q_end:?}", end.q_rad);
+        assert!((end.finger_m[0] - 0.01).abs() < 1e-6);
         assert_eq!(f.tick().q_rad, end.q_rad, "past the ramp it holds");
         // Below the table: the simulated arm keeps its last pose and counts it.
         f.follow(&RobotState { tool_pos_m: [0.34, 0.0, -0.05], ..s }, 1);
