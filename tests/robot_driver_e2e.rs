@@ -219,6 +219,7 @@ fn daemon_servos_and_grasps_with_the_example_robot_driver() {
     // daemon said the servo converged (the arm it rendered followed the driver).
     let sim_report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&sim_json).unwrap()).unwrap();
     assert_eq!(sim_report["reply_timeouts"], 0, "{sim_report}\n{why}");
+    assert_eq!(sim_report["driver"], "an external robot driver's handeye/robot/state");
     let watch = &sim_report["daemon"];
     let phases: Vec<&str> = watch["phases"].as_array().unwrap().iter().map(|p| p[0].as_str().unwrap()).collect();
     for want in ["acquire_gripper", "calibrate", "acquire_target", "servo", "grasp"] {

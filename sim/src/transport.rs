@@ -43,7 +43,7 @@ pub enum RobotSide {
 /// The robot state port: published by the simulator, or read from an external driver.
 enum StatePort {
     Publisher(MessagePublisher<RobotState>),
-    Subscriber { states: MessageSubscriber<RobotState>, newest: Option<RobotState> },
+    Subscriber { states: Box<MessageSubscriber<RobotState>>, newest: Option<RobotState> },
 }
 
 /// Publisher of frames and state, subscriber of commands, in one domain.
@@ -75,7 +75,7 @@ impl WireTransport {
         let frames = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery: Delivery::Latest, ..Default::default() })?;
         let state = match robot {
             RobotSide::Simulated => StatePort::Publisher(MessagePublisher::<RobotState>::create(&node)?),
-            RobotSide::External => StatePort::Subscriber { states: MessageSubscriber::<RobotState>::create(&node)?, newest: None },
+            RobotSide::External => StatePort::Subscriber { states: Box::new(MessageSubscriber::<RobotState>::create(&node)?), newest: None },
         };
         let commands = MessageSubscriber::<RobotCommand>::create(&node)?;
         let telemetry = MessageSubscriber::<Telemetry>::create(&node)?;

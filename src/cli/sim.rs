@@ -250,7 +250,11 @@ pub fn run(args: SimArgs) -> Result<()> {
             reply_timeouts: stats.reply_timeouts,
             late_frames: stats.late_frames,
             verdict,
-            driver: if args.scripted_pick { SimDriver::ScriptedPick } else { SimDriver::Commands },
+            driver: match (args.scripted_pick, robot) {
+                (true, _) => SimDriver::ScriptedPick,
+                (false, RobotSide::External) => SimDriver::ExternalRobot,
+                (false, RobotSide::Simulated) => SimDriver::Commands,
+            },
             max_lift_mm: runner.sim.judge().max_lift_m * 1e3,
             adapter,
             domain: transport.domain().to_string(),
