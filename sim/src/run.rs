@@ -217,8 +217,13 @@ impl Runner {
         if self.sim.follower.is_none() {
             return Ok(());
         }
-        if let Some(s) = transport.external_robot_state(answering, timeout)? {
-            self.sim.external_state(&s);
+        match transport.external_robot_state(answering, timeout)? {
+            Some(s) => self.sim.external_state(&s),
+            None if self.sim.frames() == 30 => tracing::warn!(
+                "no robot state from an external driver after 30 frames: is one publishing handeye/robot/state in this domain? \
+                 The arm stays at its home pose"
+            ),
+            None => {}
         }
         Ok(())
     }

@@ -89,6 +89,13 @@ impl Simulator {
         let steps = self.scenario.substeps_per_frame();
         if let Some(f) = self.follower.as_mut() {
             f.follow(s, steps);
+            if f.states == 1 && f.jump_m() > 0.01 {
+                tracing::warn!(
+                    "the robot driver's tool is {:.0} mm from the simulated arm's home {:?}: start the driver at the scenario's [arm] home_m and home_yaw_deg",
+                    f.jump_m() * 1e3,
+                    self.scenario.arm.home_m
+                );
+            }
         }
     }
 

@@ -100,7 +100,8 @@ pub struct SimArgs {
     /// controller; or `external`, a robot driver (e.g. wire/examples/robot_driver.rs, started
     /// at the scenario's arm home): the simulator then poses the arm it renders where the
     /// driver's state says (joints by the simulated arm's IK) and only watches the commands.
-    /// In lockstep it waits, after the daemon's answer to a frame, for the driver to report
+    /// The driver keeps wall-clock time, so lockstep frames go out no faster than real time,
+    /// and after the daemon's answer to a frame the simulator waits for the driver to report
     /// that command processed.
     #[arg(long, value_enum, default_value_t = RobotArg::Sim, conflicts_with = "scripted_pick")]
     robot: RobotArg,
