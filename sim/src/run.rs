@@ -58,6 +58,12 @@ pub trait Transport {
     fn receive_telemetry(&mut self, _out: &mut Vec<Telemetry>) -> Result<(), RunError> {
         Ok(())
     }
+    /// With an external robot driver, its newest state (`None` without one, or before its
+    /// first). `answering = Some(n)` (lockstep): first wait up to `timeout` for a state in
+    /// which the driver has processed the command that answered frame `n`.
+    fn external_robot_state(&mut self, _answering: Option<u64>, _timeout: Duration) -> Result<Option<RobotState>, RunError> {
+        Ok(None)
+    }
 }
 
 /// A transport that carries nothing: frames are rendered (and hashed) but go nowhere, and
@@ -205,6 +211,23 @@ impl Runner {
         Ok(meta)
     }
 
+    /// With an external robot driver: poses the arm over the next frame where the driver's
+    /// newest state says (see [`Transport::external_robot_state`]).
+    fn follow_driver(&mut self, transport: &mut dyn Transport, answering: Option<u64>, timeout: Duration) -> Result<(), RunError> {
+        if self.sim.follower.is_none() {
+            return Ok(());
+        }
+        match transport.external_robot_state(answering, timeout)? {
+            Some(s) => self.sim.external_state(&s),
+            None if self.sim.frames() == 30 => tracing::warn!(
+                "no robot state from an external driver after 30 frames: is one publishing handeye/robot/state in this domain? \
+                 The arm stays at its home pose"
+            ),
+            None => {}
+        }
+        Ok(())
+    }
+
     /// One frame period of physics, publishing the robot state after every step (the
     /// controller reports once per control tick). `before_step` runs before each step.
     fn step_frame_publishing(
@@ -262,7 +285,9 @@ fn done(runner: &Runner, options: &RunOptions, published: u64) -> bool {
 /// Lockstep: publish frame N, wait for a command stamped N (or the time-out; at once if no
 /// daemon is attached), apply the commands, step one frame period. Deterministic for a seed.
 /// With a `driver`, its command answers each frame and nothing waits for the transport
-/// (commands arriving there, e.g. an operator's Stop, still apply).
+/// (commands arriving there, e.g. an operator's Stop, still apply). With an external robot
+/// driver (`Simulator::follow_external_robot`) frames go out no faster than real time, and
+/// after the daemon's answer the simulator waits for the driver to report it processed.
 pub fn run_lockstep(
     runner: &mut Runner,
     transport: &mut dyn Transport,
@@ -274,10 +299,20 @@ pub fn run_lockstep(
     let mut commands = Vec::new();
     let result = (|| {
         while !done(runner, options, stats.frames) && !transport.interrupted() {
+            if runner.sim.follower.is_some() {
+                // An external robot driver moves on the wall clock: never let simulated time
+                // run ahead of it (a quick renderer would make the driver's arm look slow).
+                let due = start + Duration::from_nanos(runner.sim.now_ns());
+                let now = Instant::now();
+                if due > now {
+                    std::thread::sleep(due - now);
+                }
+            }
             let meta = runner.publish(transport)?;
             stats.frames += 1;
             let deadline = Instant::now() + options.reply_timeout;
             let mut answered = driver.is_some() || !transport.daemon_attached();
+            let mut replied = false;
             if let Some(d) = driver.as_mut()
                 && let Some(c) = d.command(&mut runner.sim, meta.frame_id)
             {
@@ -291,7 +326,8 @@ pub fn run_lockstep(
                     runner.watch.command(meta.frame_id, c);
                     runner.sim.command(c);
                     stats.commands += 1;
-                    answered |= c.frame_id == meta.frame_id;
+                    replied |= c.frame_id == meta.frame_id;
+                    answered |= replied;
                 }
                 if answered {
                     break;
@@ -310,6 +346,7 @@ pub fn run_lockstep(
             // what it says about frame N is here now, and the arm is still where frame N
             // showed it.
             runner.watch_daemon(transport, meta.frame_id)?;
+            runner.follow_driver(transport, replied.then_some(meta.frame_id), options.reply_timeout)?;
             runner.step_frame_publishing(transport, |_, _| Ok(()))?;
         }
         Ok(())
@@ -346,6 +383,7 @@ pub fn run_realtime(
                 received += 1;
             }
             let mut stops = 0u32;
+            runner.follow_driver(transport, None, Duration::ZERO)?;
             runner.step_frame_publishing(transport, |sim, transport| {
                 commands.clear();
                 transport.receive_commands(&mut commands)?;

@@ -11,6 +11,7 @@ use handeye_wire::{RobotCommand, RobotState};
 
 use crate::cell::arm::ArmReading;
 use crate::cell::controller::{Controller, ControllerConfig};
+use crate::cell::follower::Follower;
 use crate::cell::kinematics::{IkError, ToolPose};
 use crate::cell::world::World;
 use crate::events::EventState;
@@ -33,6 +34,9 @@ pub struct Simulator {
     pub controller: Controller,
     pub events: EventState,
     pub scene: Scene,
+    /// With an external robot driver: the motors follow its reported pose, and the
+    /// controller above is idle (see [`Self::follow_external_robot`]).
+    pub follower: Option<Follower>,
     judge: SuccessJudge,
     target: usize,
     reading: ArmReading,
@@ -53,7 +57,7 @@ impl Simulator {
         let reading = world.arm.read(&world.physics);
         let events = EventState::new(&scenario);
         let scene = Scene::build(&scenario, &world);
-        Ok(Self { scenario, world, controller, events, scene, judge, target, reading, steps: 0, frames: 0 })
+        Ok(Self { scenario, world, controller, events, scene, follower: None, judge, target, reading, steps: 0, frames: 0 })
     }
 
     /// Simulated time now, ns (exact: steps × 10⁹ / rate).
@@ -71,8 +75,36 @@ impl Simulator {
         self.frames
     }
 
-    /// Hands a command to the controller; it takes effect at the next step.
+    /// From now on the arm follows an external robot driver's reported pose
+    /// ([`Self::external_state`]) instead of the simulator's controller, which then ignores
+    /// commands: they are the driver's to carry out.
+    pub fn follow_external_robot(&mut self) -> Result<(), IkError> {
+        let home = ToolPose { pos_m: DVec3::from_array(self.scenario.arm.home_m), yaw_rad: self.scenario.arm.home_yaw_deg.to_radians() };
+        self.follower = Some(Follower::new(home)?);
+        Ok(())
+    }
+
+    /// The external driver's newest state, reached over the next frame's physics steps.
+    pub fn external_state(&mut self, s: &RobotState) {
+        let steps = self.scenario.substeps_per_frame();
+        if let Some(f) = self.follower.as_mut() {
+            f.follow(s, steps);
+            if f.states == 1 && f.jump_m() > 0.01 {
+                tracing::warn!(
+                    "the robot driver's tool is {:.0} mm from the simulated arm's home {:?}: start the driver at the scenario's [arm] home_m and home_yaw_deg",
+                    f.jump_m() * 1e3,
+                    self.scenario.arm.home_m
+                );
+            }
+        }
+    }
+
+    /// Hands a command to the controller; it takes effect at the next step. Ignored while an
+    /// external driver moves the arm.
     pub fn command(&mut self, cmd: &RobotCommand) {
+        if self.follower.is_some() {
+            return;
+        }
         let now = self.now_ns();
         self.controller.command(cmd, now, &self.reading);
     }
@@ -82,7 +114,10 @@ impl Simulator {
         let now = self.now_ns();
         self.events.update(now, &mut self.world);
         let dt = self.scenario.physics_dt_s();
-        let targets = self.controller.tick(now, dt, &self.reading);
+        let targets = match self.follower.as_mut() {
+            Some(f) => f.tick(),
+            None => self.controller.tick(now, dt, &self.reading),
+        };
         self.world.arm.drive(&mut self.world.physics, &targets);
         self.world.step();
         self.steps += 1;

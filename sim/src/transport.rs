@@ -2,6 +2,12 @@
 //! on `handeye/stereo` (rendered straight into the loaned sample) and the robot state on
 //! `handeye/robot/state`, and takes commands from `handeye/robot/command`, exactly as a
 //! camera pair and a robot controller would.
+//!
+//! With an external robot ([`RobotSide::External`], `handeye sim --robot external`) it is the
+//! camera pair only: a robot driver (e.g. `wire/examples/robot_driver.rs`) serves the robot
+//! services, and the simulator subscribes to its state to pose the arm it renders. It still
+//! reads the commands, only to know when the daemon has answered a lockstep frame and to
+//! judge the daemon; it never carries them out.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -24,11 +30,27 @@ pub enum TransportError {
     Message(#[from] handeye_wire::message::MessagePortError),
 }
 
+/// Who serves the robot services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RobotSide {
+    /// The simulator's own controller: it publishes the state and carries out the commands.
+    #[default]
+    Simulated,
+    /// An external driver: the simulator subscribes to its state and poses the arm there.
+    External,
+}
+
+/// The robot state port: published by the simulator, or read from an external driver.
+enum StatePort {
+    Publisher(MessagePublisher<RobotState>),
+    Subscriber { states: Box<MessageSubscriber<RobotState>>, newest: Option<RobotState> },
+}
+
 /// Publisher of frames and state, subscriber of commands, in one domain.
 pub struct WireTransport {
     // Ports before the node: they are dropped first.
     frames: StereoPublisher,
-    state: MessagePublisher<RobotState>,
+    state: StatePort,
     commands: MessageSubscriber<RobotCommand>,
     /// The daemon's telemetry, read only to judge it against ground truth.
     telemetry: MessageSubscriber<Telemetry>,
@@ -41,12 +63,20 @@ pub struct WireTransport {
 impl WireTransport {
     /// Joins `domain` as the camera pair (`width` x `height` GRAY8 views) and the robot.
     pub fn new(domain: &Domain, width: u32, height: u32) -> Result<Self, TransportError> {
+        Self::with_robot(domain, width, height, RobotSide::Simulated)
+    }
+
+    /// Joins `domain` as the camera pair, and as the robot unless `robot` is external.
+    pub fn with_robot(domain: &Domain, width: u32, height: u32, robot: RobotSide) -> Result<Self, TransportError> {
         let node = WireNode::create(domain, "handeye-sim")?;
         let geometry = StereoFormat::gray8_pair(width, height);
         // Latest-frame delivery, like a camera: in lockstep the simulator waits for the
         // daemon's reply to each frame anyway, so the daemon never falls behind.
         let frames = StereoPublisher::create(&node, geometry, StereoPublisherOptions { delivery: Delivery::Latest, ..Default::default() })?;
-        let state = MessagePublisher::<RobotState>::create(&node)?;
+        let state = match robot {
+            RobotSide::Simulated => StatePort::Publisher(MessagePublisher::<RobotState>::create(&node)?),
+            RobotSide::External => StatePort::Subscriber { states: Box::new(MessageSubscriber::<RobotState>::create(&node)?), newest: None },
+        };
         let commands = MessageSubscriber::<RobotCommand>::create(&node)?;
         let telemetry = MessageSubscriber::<Telemetry>::create(&node)?;
         Ok(Self { frames, state, commands, telemetry, pending: VecDeque::new(), node, geometry })
@@ -123,7 +153,34 @@ impl Transport for WireTransport {
     }
 
     fn publish_state(&mut self, state: &RobotState) -> Result<(), RunError> {
-        self.state.send(state).map(|_| ()).map_err(|e| RunError::Transport(e.to_string()))
+        match &mut self.state {
+            StatePort::Publisher(p) => p.send(state).map(|_| ()).map_err(|e| RunError::Transport(e.to_string())),
+            StatePort::Subscriber { .. } => Ok(()), // the external driver publishes its own
+        }
+    }
+
+    fn external_robot_state(&mut self, answering: Option<u64>, timeout: Duration) -> Result<Option<RobotState>, RunError> {
+        let StatePort::Subscriber { states, newest } = &mut self.state else { return Ok(None) };
+        while let Some(s) = states.try_receive() {
+            *newest = Some(s);
+        }
+        let Some(frame) = answering else { return Ok(*newest) };
+        // Lockstep: the daemon answered frame `frame`; wait until the driver has processed
+        // that command, so the next frame shows the arm after it.
+        let deadline = std::time::Instant::now() + timeout;
+        while !newest.is_some_and(|s| s.last_command_frame_id == frame) {
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                break;
+            }
+            match states.wait(deadline - now).map_err(|e| RunError::Transport(e.to_string()))? {
+                MessageEvent::Message(s) => *newest = Some(s),
+                MessageEvent::Interrupted => return Err(RunError::Interrupted),
+                MessageEvent::PublisherGone => tracing::warn!("the robot driver left"),
+                MessageEvent::PublisherUp | MessageEvent::Timeout => {}
+            }
+        }
+        Ok(*newest)
     }
 
     fn receive_commands(&mut self, out: &mut Vec<RobotCommand>) -> Result<(), RunError> {

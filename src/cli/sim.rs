@@ -9,7 +9,7 @@ use handeye_sim::referee::judge::Verdict;
 use handeye_sim::referee::report::{LaidOutBlock, SimDriver, SimMode, SimReport};
 use handeye_sim::run::{Driver, RunOptions, Runner, run_lockstep, run_realtime};
 use handeye_sim::referee::script::GroundTruthPick;
-use handeye_sim::transport::WireTransport;
+use handeye_sim::transport::{RobotSide, WireTransport};
 use handeye_sim::{Scenario, Simulator};
 
 use super::domain::DomainArgs;
@@ -29,9 +29,15 @@ use super::units::parse_seconds;
 ///   (default)    real time: frames at the scenario's camera rate, stamped with their
 ///                capture time; commands act at the next physics step.
 ///
+/// With --robot external the simulator is the camera pair only: a robot driver serves the
+/// robot services (README, "Connecting a real robot") and the simulator renders the arm where
+/// the driver's state says.
+///
 /// Examples:
 ///   handeye sim scenarios/pick_cube.toml --lockstep --frames 100 --json
 ///   handeye sim scenarios/pick_cube_bump.toml
+///   cargo run -p handeye-wire --example robot_driver -- --home 0.30,0,0.25 --home-yaw-deg -90 &
+///   handeye sim scenarios/pick_cube.toml --robot external
 #[derive(Args)]
 pub struct SimArgs {
     /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
@@ -90,8 +96,24 @@ pub struct SimArgs {
     /// Also write the JSON object of --json to this file (the verdict `handeye run` merges).
     #[arg(long, value_name = "FILE")]
     verdict_out: Option<PathBuf>,
+    /// Who serves handeye/robot/state and handeye/robot/command: `sim`, the simulator's own
+    /// controller; or `external`, a robot driver (e.g. wire/examples/robot_driver.rs, started
+    /// at the scenario's arm home): the simulator then poses the arm it renders where the
+    /// driver's state says (joints by the simulated arm's IK) and only watches the commands.
+    /// The driver keeps wall-clock time, so lockstep frames go out no faster than real time,
+    /// and after the daemon's answer to a frame the simulator waits for the driver to report
+    /// that command processed.
+    #[arg(long, value_enum, default_value_t = RobotArg::Sim, conflicts_with = "scripted_pick")]
+    robot: RobotArg,
     #[command(flatten)]
     domain: DomainArgs,
+}
+
+/// `--robot`: who serves the robot services.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum RobotArg {
+    Sim,
+    External,
 }
 
 /// Mesa's Vulkan driver complains on stderr when XDG_RUNTIME_DIR is unset (it probes for a
@@ -145,6 +167,10 @@ pub fn run(args: SimArgs) -> Result<()> {
     lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize)?;
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
+    let robot = if args.robot == RobotArg::External { RobotSide::External } else { RobotSide::Simulated };
+    if robot == RobotSide::External {
+        runner.sim.follow_external_robot().context("the arm's home pose")?;
+    }
     let adapter = runner.renderer.adapter();
     if !args.json {
         eprintln!("renderer: {adapter}");
@@ -178,13 +204,14 @@ pub fn run(args: SimArgs) -> Result<()> {
         }
     }
     let (w, h) = (runner.renderer.width(), runner.renderer.height());
-    let mut transport = WireTransport::new(&args.domain.domain, w, h)?;
+    let mut transport = WireTransport::with_robot(&args.domain.domain, w, h, robot)?;
     if args.lockstep && args.wait_daemon_s > 0.0 && !transport.wait_for_daemon(Duration::from_secs_f64(args.wait_daemon_s))? {
         anyhow::bail!("no daemon attached to domain '{}' within {} s", transport.domain(), args.wait_daemon_s);
     }
     if !args.json {
         eprintln!(
-            "sim: {name} on handeye/stereo + handeye/robot/* in domain '{}' ({}, 2 x {w}x{h} GRAY8 at {} frames/s of simulated time)",
+            "sim: {name} on handeye/stereo + {} in domain '{}' ({}, 2 x {w}x{h} GRAY8 at {} frames/s of simulated time)",
+            if robot == RobotSide::External { "the arm posed by an external driver's handeye/robot/state" } else { "handeye/robot/*" },
             transport.domain(),
             if args.lockstep { "lockstep" } else { "real time" },
             runner.sim.scenario.render.frame_rate_hz
@@ -201,6 +228,9 @@ pub fn run(args: SimArgs) -> Result<()> {
     } else {
         run_realtime(&mut runner, &mut transport, &options, driver)?
     };
+    if let Some(f) = &runner.sim.follower {
+        eprintln!("sim: followed {} robot driver states; {} poses beyond the simulated arm", f.states, f.unreachable);
+    }
     let verdict = runner.sim.verdict();
     let verdict_text = match verdict {
         Verdict::Pending => "pending".to_string(),
@@ -221,7 +251,11 @@ pub fn run(args: SimArgs) -> Result<()> {
             reply_timeouts: stats.reply_timeouts,
             late_frames: stats.late_frames,
             verdict,
-            driver: if args.scripted_pick { SimDriver::ScriptedPick } else { SimDriver::Commands },
+            driver: match (args.scripted_pick, robot) {
+                (true, _) => SimDriver::ScriptedPick,
+                (false, RobotSide::External) => SimDriver::ExternalRobot,
+                (false, RobotSide::Simulated) => SimDriver::Commands,
+            },
             max_lift_mm: runner.sim.judge().max_lift_m * 1e3,
             adapter,
             domain: transport.domain().to_string(),

@@ -29,6 +29,9 @@ pub enum SimDriver {
     ScriptedPick,
     /// Whatever arrives on `handeye/robot/command` (the daemon).
     Commands,
+    /// `--robot external`: a robot driver outside the simulator carried out the commands; the
+    /// arm followed the state it published.
+    ExternalRobot,
 }
 
 impl SimDriver {
@@ -37,6 +40,7 @@ impl SimDriver {
         match self {
             Self::ScriptedPick => "scripted pick from ground truth (physics demo)",
             Self::Commands => "commands from handeye/robot/command",
+            Self::ExternalRobot => "an external robot driver's handeye/robot/state",
         }
     }
 }
@@ -50,7 +54,7 @@ impl Serialize for SimDriver {
 impl<'de> Deserialize<'de> for SimDriver {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let text = String::deserialize(d)?;
-        [Self::ScriptedPick, Self::Commands]
+        [Self::ScriptedPick, Self::Commands, Self::ExternalRobot]
             .into_iter()
             .find(|k| k.describe() == text)
             .ok_or_else(|| serde::de::Error::invalid_value(serde::de::Unexpected::Str(&text), &"a driver description"))
