@@ -226,16 +226,40 @@ fn kill_daemon(r: &mut Running, result: &mut CaseResult) {
     let watchdog = after.iter().position(flagged);
     if let Some(i) = watchdog {
         // The watchdog counts from the last command the arm took (one still in flight at the
-        // kill lands after it). Both ends are sampled: the command took effect after the last
-        // state that lacks it and by the first that has it; the watchdog fired after the
-        // last state without its flag and by the first with it.
-        let seen = &r.listener.recent;
+        // kill lands after it). The test reads only the newest four robot states, so both
+        // ends are sampled. A lockstep simulator applies commands only where a frame starts
+        // (a multiple of `substeps` physics steps), after the last state that lacks the
+        // command and before the first that has it; the watchdog fired after the last state
+        // without its flag and by the first with it. Reported: the longest the samples
+        // allow; judged: the shortest, which must be within the bound, or it was surely late.
+        let sc = handeye_sim::scenario::Scenario::load(&r.scenario).expect("the scenario loads");
+        let (rate_hz, substeps) = (u128::from(sc.physics.rate_hz), u128::from(sc.substeps_per_frame()));
+        let frame_start_ns = |k: u128| (k * substeps * 1_000_000_000 / rate_hz) as u64;
+        let seen: Vec<RobotState> = r.listener.recent.iter().copied().collect();
         let last_seq = after.iter().map(|s| s.last_command_seq).max().unwrap_or(0);
-        let cmd_ns = seen.iter().find(|s| s.last_command_seq == last_seq).map_or(arm_clock_at_kill_ns, |s| s.time_ns);
-        let fired_ns = after[i].time_ns;
-        let before_ns = if i > 0 { after[i - 1].time_ns } else { arm_clock_at_kill_ns };
-        let mut d = Detection::new("arm", "watchdog stop after its last command (arm clock)", ms_between(cmd_ns, fired_ns), WATCHDOG_MS + CONTROL_TICK_MS);
-        d.sampling_ms = ms_between(before_ns, fired_ns);
+        let first_with = seen.iter().position(|s| s.last_command_seq == last_seq).unwrap_or(0);
+        let cmd_hi = seen[first_with].time_ns;
+        let cmd_lo = if first_with > 0 { seen[first_with - 1].time_ns } else { 0 };
+        // Frame starts in [cmd_lo, cmd_hi): the earliest and the latest the command can have landed.
+        // (Frame starts are whole nanoseconds rounded down, as the simulator's clock is.)
+        let first_at_or_after = |t: u64| {
+            let mut k = u128::from(t) * rate_hz / (substeps * 1_000_000_000);
+            while frame_start_ns(k) < t {
+                k += 1;
+            }
+            k
+        };
+        let k_lo = first_at_or_after(cmd_lo);
+        let k_hi = first_at_or_after(cmd_hi).saturating_sub(1).max(k_lo);
+        let (cmd_earliest, cmd_latest) = (frame_start_ns(k_lo).max(cmd_lo), frame_start_ns(k_hi).min(cmd_hi));
+        let fire_hi = after[i].time_ns;
+        let fire_lo = if i > 0 { after[i - 1].time_ns } else { arm_clock_at_kill_ns.min(fire_hi) };
+        let tick_ms = 1e3 / sc.physics.rate_hz as f64;
+        let longest = ms_between(cmd_earliest, fire_hi);
+        // The controller stops in the first step that starts more than 200 ms after the
+        // command, and a state carries the time after its step: two ticks at most.
+        let mut d = Detection::new("arm", "watchdog stop after its last command (arm clock)", longest, WATCHDOG_MS + 2.0 * tick_ms);
+        d.sampling_ms = longest - ms_between(cmd_latest, fire_lo);
         result.detections.push(d);
     } else if moving {
         // No watchdog stop: the set-point reached the last commanded target within 200 ms
@@ -265,20 +289,20 @@ fn kill_daemon(r: &mut Running, result: &mut CaseResult) {
             result.notes.push("the arm never came to rest".into());
         }
     }
-    // A fresh daemon in the same domain: it must get frames (telemetry) and command the arm.
-    while r.listener.cmds.try_receive().is_some() {}
-    while r.listener.tel.try_receive().is_some() {}
+    // A fresh daemon in the same domain: its ports must work, i.e. the arm takes a command
+    // from it (its states name a command sequence number the dead daemon's did not). Its
+    // telemetry is no proof either way: a daemon that stops at once exits, and iceoryx2 drops
+    // the samples of a publisher that is gone before a subscriber took them.
+    let dead_seq = r.listener.last_state.map_or(0, |s| s.last_command_seq);
     r.daemon = start_daemon(&r.domain, &r.hint);
-    let tel = r.listener.telemetry(Duration::from_secs(60));
-    let cmd = poll(Duration::from_secs(30), || {
-        r.listener.drain_states();
-        match r.listener.cmds.wait(Duration::from_millis(20)).unwrap() {
-            MessageEvent::Message(c) => Some(c),
-            _ => None,
-        }
-    });
-    result.restart_ok = tel.is_some() && cmd.is_some();
-    if !result.restart_ok {
-        result.notes.push(format!("fresh daemon: telemetry {}, command {}", tel.is_some(), cmd.is_some()));
+    let took = poll(Duration::from_secs(60), || r.listener.drain_states().into_iter().find(|s| s.last_command_seq != dead_seq));
+    result.restart_ok = took.is_some();
+    // What it made of the arm the dead daemon left behind.
+    if poll(Duration::from_millis(500), || r.daemon.child.try_wait().unwrap()).is_some() {
+        let fresh = std::mem::replace(&mut r.daemon, Proc::spawn("true", Command::new("true")));
+        let (_, out, err) = fresh.finish(Duration::from_secs(10));
+        let reason = out.lines().rev().find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()).map(|v| v["failure_reason"].to_string());
+        let last_err = err.lines().last().unwrap_or("").to_owned();
+        result.notes.push(format!("the fresh daemon stopped at once: {}", reason.unwrap_or(last_err)));
     }
 }

@@ -30,9 +30,9 @@ pub const PUBLISHER_GONE_MS: f64 = 500.0;
 pub const STALE_FRAME_MS: f64 = 100.0;
 pub const SCHEDULING_ALLOWANCE_MS: f64 = 100.0;
 /// The simulated arm's command watchdog (`ControllerConfig::watchdog_ns`), in the arm's own
-/// clock, plus the one control tick it may take to see it (pick_cube's physics runs at 240 Hz).
+/// clock; its bound adds two control ticks (the scenario's physics step): one to exceed the
+/// 200 ms, one because a state is stamped at the end of its step.
 pub const WATCHDOG_MS: f64 = 200.0;
-pub const CONTROL_TICK_MS: f64 = 1000.0 / 240.0;
 /// A tool displacement below this after the arm stopped is sensor-level jitter, not a move.
 pub const STILL_M: f32 = 0.001;
 
@@ -130,8 +130,9 @@ pub struct Detection {
     pub what: &'static str,
     pub measured_ms: f64,
     pub bound_ms: f64,
-    /// How much earlier it may really have been: a report sampled rather than seen as it was
-    /// made (robot states: the test reads the newest four, so some are never seen).
+    /// How much shorter it may really have been: `measured_ms` is the longest the samples
+    /// allow when the report was sampled rather than seen as it was made (robot states: the
+    /// test reads the newest four, so some are never seen).
     pub sampling_ms: f64,
 }
 
@@ -223,8 +224,8 @@ pub fn run_case(plan: Plan) -> CaseResult {
 /// after death and restarts.
 pub fn table(results: &[CaseResult]) -> String {
     let mut out = String::from(
-        "| killed | cases | survivor: what it noticed | detection p50 / max (ms) | bound (ms) | arm moving at kill | moves after stop | restarts ok |\n\
-         | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "| killed | cases | survivor: what it noticed | detection p50 / max (ms) | of which sampling, max (ms) | bound (ms) | arm moving at kill | moves after stop | restarts ok |\n\
+         | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for victim in Victim::available() {
         let cases: Vec<&CaseResult> = results.iter().filter(|r| r.plan.victim == victim).collect();
@@ -243,8 +244,10 @@ pub fn table(results: &[CaseResult]) -> String {
         let restarts = cases.iter().filter(|c| c.restart_ok).count();
         let rows = if survivors.is_empty() { vec![("-", "-", f64::NAN)] } else { survivors };
         for (i, (survivor, what, bound)) in rows.iter().enumerate() {
-            let mut ms: Vec<f64> =
-                cases.iter().flat_map(|c| &c.detections).filter(|d| d.survivor == *survivor && d.what == *what).map(|d| d.measured_ms).collect();
+            let ds: Vec<&Detection> = cases.iter().flat_map(|c| &c.detections).filter(|d| d.survivor == *survivor && d.what == *what).collect();
+            let mut ms: Vec<f64> = ds.iter().map(|d| d.measured_ms).collect();
+            let sampling = ds.iter().map(|d| d.sampling_ms).fold(0.0, f64::max);
+            let sampling = if sampling > 0.0 { format!("{sampling:.0}") } else { "-".to_owned() };
             ms.sort_by(f64::total_cmp);
             let stat = if ms.is_empty() { "-".to_owned() } else { format!("{:.0} / {:.0}", ms[(ms.len() - 1) / 2], ms[ms.len() - 1]) };
             let (name, n, mv, mvs, rs) = if i == 0 {
@@ -258,7 +261,7 @@ pub fn table(results: &[CaseResult]) -> String {
             } else {
                 Default::default()
             };
-            let _ = writeln!(out, "| {name} | {n} | {survivor}: {what} | {stat} | {bound:.0} | {mv} | {mvs} | {rs} |");
+            let _ = writeln!(out, "| {name} | {n} | {survivor}: {what} | {stat} | {sampling} | {bound:.0} | {mv} | {mvs} | {rs} |");
         }
     }
     out
