@@ -32,6 +32,7 @@ fn camera(domain: &TestDomain) -> Proc {
         "120",
         "--progress-s",
         "0",
+        "--json",
         // Not about stalls: a loaded machine must not make one.
         "--stall-timeout-s",
         "5",
@@ -121,6 +122,16 @@ pub fn run(plan: Plan) -> CaseResult {
             let camera_alive = cam.child.try_wait().unwrap().is_none();
             let gap_ms = if camera_alive && n > 0 { gap.as_secs_f64() * 1e3 } else { f64::INFINITY };
             result.detections.push(Detection::new("camera", "frames keep flowing (longest gap)", gap_ms, PUBLISHER_GONE_MS));
+            if camera_alive && gap_ms > PUBLISHER_GONE_MS {
+                // What the camera saw meanwhile: frames it could not hand over, or none to hand.
+                cam.interrupt();
+                let (_, out, _) = std::mem::replace(&mut cam, camera(&domain)).finish(Duration::from_secs(10));
+                let c = parse_json(&out);
+                result.notes.push(format!(
+                    "camera: {} published, {} dropped for want of a slot, {} dropped busy",
+                    c["frames"], c["dropped_publish"], c["dropped_busy_left"]
+                ));
+            }
             // A fresh one of the same kind in the same domain receives frames.
             let fresh = if plan.victim == Victim::Record { record(&domain, &dir.0.join("rec2"), 10) } else { monitor(&domain, 10) };
             let (ok, out, err) = fresh.finish(Duration::from_secs(30));
