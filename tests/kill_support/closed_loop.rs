@@ -18,7 +18,7 @@ use handeye_wire::{monotonic_ns, robot_flags, Domain, Phase, RobotCommand, Robot
 
 use super::*;
 use crate::e2e_support::{scenario_without_antialias, TempDir};
-use crate::wire_support::Proc;
+use crate::wire_support::{Proc, TestDomain};
 
 /// Lockstep frames wait this long for the daemon's reply: with the daemon dead, the
 /// simulator keeps stepping (and the watchdog keeps counting) at about a frame per 0.1 s.
@@ -104,16 +104,18 @@ fn phase_name(raw: u32) -> String {
 }
 
 /// A running loop, up for the seed's number of daemon cycles.
+/// Fields drop in order: the processes die first, then the domain's files and the folder go
+/// (also when a case panics).
 struct Running {
-    dir: TempDir,
-    domain: Domain,
-    scenario: std::path::PathBuf,
-    hint: std::path::PathBuf,
-    listener: Listener,
     sim: Proc,
     daemon: Proc,
+    listener: Listener,
     /// The daemon's newest telemetry before the kill.
     last: Telemetry,
+    scenario: std::path::PathBuf,
+    hint: std::path::PathBuf,
+    domain: TestDomain,
+    dir: TempDir,
 }
 
 /// Starts the loop and lets the daemon run the seed's number of cycles. A daemon
@@ -122,12 +124,12 @@ struct Running {
 fn start(plan: &Plan, result: &mut CaseResult) -> Running {
     for attempt in 1..=3 {
         let dir = TempDir::new(&format!("kill{}", plan.seed));
-        let domain = Domain::unique(&format!("kill{}", plan.seed));
-        let mut listener = Listener::new(&domain);
+        let domain = TestDomain::new(&format!("kill{}", plan.seed));
+        let mut listener = Listener::new(&domain.0);
         let scenario = scenario_without_antialias("pick_cube.toml", &dir.0);
         let hint = dir.0.join("hint.json");
-        let sim = start_sim(&dir.0, &domain, &scenario, &hint);
-        let daemon = start_daemon(&domain, &hint);
+        let sim = start_sim(&dir.0, &domain.0, &scenario, &hint);
+        let daemon = start_daemon(&domain.0, &hint);
         let Some(mut last) = listener.telemetry(Duration::from_secs(120)) else {
             panic!("seed {}: the daemon sent no telemetry within 120 s", plan.seed);
         };
@@ -143,13 +145,12 @@ fn start(plan: &Plan, result: &mut CaseResult) -> Running {
             cycles += 1;
         }
         if !stopped_early {
-            return Running { dir, domain, scenario, hint, listener, sim, daemon, last };
+            return Running { sim, daemon, listener, last, scenario, hint, domain, dir };
         }
         assert!(attempt < 3, "seed {}: the daemon stopped on its own three times before the kill ({})", plan.seed, last.reason_text());
         result.setup_retries += 1;
         result.notes.push(format!("set-up {attempt}: the daemon stopped before the kill ({})", last.reason_text()));
-        drop((sim, daemon, listener));
-        let _ = handeye_wire::domain::remove_domain_files(&domain);
+        drop((sim, daemon, listener, domain));
     }
     unreachable!()
 }
@@ -163,9 +164,7 @@ pub fn run(plan: Plan) -> CaseResult {
         Victim::Daemon => kill_daemon(&mut r, &mut result),
         _ => unreachable!("not a closed-loop process"),
     }
-    drop((r.sim, r.daemon, r.listener));
-    let _ = handeye_wire::domain::remove_domain_files(&r.domain);
-    drop(r.dir);
+    drop(r);
     result
 }
 
@@ -199,8 +198,8 @@ fn kill_simulator(r: &mut Running, result: &mut CaseResult) {
     }
     // A fresh simulator and daemon in the same domain: the dead simulator's node must not be
     // in the way. Up means the new daemon publishes telemetry, i.e. it got a frame.
-    r.sim = start_sim(&r.dir.0, &r.domain, &r.scenario, &r.hint);
-    r.daemon = start_daemon(&r.domain, &r.hint);
+    r.sim = start_sim(&r.dir.0, &r.domain.0, &r.scenario, &r.hint);
+    r.daemon = start_daemon(&r.domain.0, &r.hint);
     result.restart_ok = r.listener.telemetry(Duration::from_secs(120)).is_some();
 }
 
@@ -294,7 +293,7 @@ fn kill_daemon(r: &mut Running, result: &mut CaseResult) {
     // telemetry is no proof either way: a daemon that stops at once exits, and iceoryx2 drops
     // the samples of a publisher that is gone before a subscriber took them.
     let dead_seq = r.listener.last_state.map_or(0, |s| s.last_command_seq);
-    r.daemon = start_daemon(&r.domain, &r.hint);
+    r.daemon = start_daemon(&r.domain.0, &r.hint);
     let took = poll(Duration::from_secs(60), || r.listener.drain_states().into_iter().find(|s| s.last_command_seq != dead_seq));
     result.restart_ok = took.is_some();
     // What it made of the arm the dead daemon left behind.
