@@ -141,9 +141,11 @@ impl Detection {
         Self { survivor, what, measured_ms, bound_ms, sampling_ms: 0.0 }
     }
 
-    /// Noticed too late for certain: even at the earliest moment the samples allow.
+    /// Noticed too late for certain: even at the earliest moment the samples allow. A
+    /// survivor that never noticed (NaN or infinite) is late too.
     pub fn late(&self) -> bool {
-        !(self.measured_ms - self.sampling_ms <= self.bound_ms)
+        let earliest = self.measured_ms - self.sampling_ms;
+        earliest.is_nan() || earliest > self.bound_ms
     }
 }
 
