@@ -14,6 +14,8 @@
 #   gstreamer1.0-plugins-good         v4l2src (USB cameras), mp4 (de)muxing, pngdec, multifilesrc.
 #   gstreamer1.0-plugins-ugly         x264enc: the tests make an H.264 video from real frames.
 #   gstreamer1.0-libav                avdec_h264: decoding H.264 files and cameras.
+#   util-linux                        setpriv: tests/permissions.rs runs an intruder as `nobody`
+#                                     (Essential in Debian, so only a stripped image lacks it).
 #
 # iceoryx2 needs nothing but a writable /dev/shm (and /tmp); rapier, nalgebra and glam need
 # nothing.
@@ -29,6 +31,7 @@ if ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; then loader=true; fi
 $loader || need+=(libvulkan1)
 $have_icd || need+=(mesa-vulkan-drivers)
 command -v cc >/dev/null 2>&1 || need+=(gcc libc6-dev)
+command -v setpriv >/dev/null 2>&1 || need+=(util-linux)
 # Debian packages by name: installed ones are skipped.
 have_deb() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'ok installed'; }
 for p in pkg-config libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev gstreamer1.0-plugins-base \
