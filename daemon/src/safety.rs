@@ -30,7 +30,12 @@ pub fn check_robot(cfg: &SafetyConfig, previous: Option<&RobotState>, s: &RobotS
     if s.flags & robot_flags::FAULT != 0 {
         return Err(Fault::new(FailureKind::RobotFault, format!("robot fault (code {})", s.fault)));
     }
-    if s.flags & robot_flags::WATCHDOG_STOP != 0 {
+    // The watchdog's flag stays up until the next move. Raised before this daemon's first
+    // reading it is the previous commander's (a daemon killed mid-move): the arm is already
+    // still, and the next move clears it. Only a flag raised while this daemon commands is its
+    // own fault (its commands arrived late).
+    let watchdog_raised = |r: &RobotState| r.flags & robot_flags::WATCHDOG_STOP != 0;
+    if watchdog_raised(s) && previous.is_some_and(|p| !watchdog_raised(p)) {
         return Err(Fault::new(FailureKind::RobotFault, "robot watchdog stopped the arm (commands arrived late)"));
     }
     let p = s.tool_pos_m.map(f64::from);
@@ -90,9 +95,14 @@ mod tests {
         assert_eq!(check_robot(&cfg, None, &ok), Ok(()));
         let fault = RobotState { flags: robot_flags::FAULT, fault: 7, ..ok };
         assert_eq!(check_robot(&cfg, None, &fault).unwrap_err(), Fault::new(FailureKind::RobotFault, "robot fault (code 7)"));
-        let wd = RobotState { flags: robot_flags::WATCHDOG_STOP, ..ok };
-        let err = check_robot(&cfg, None, &wd).unwrap_err();
+        let wd = RobotState { flags: robot_flags::WATCHDOG_STOP, seq: 2, time_ns: 20, ..ok };
+        let err = check_robot(&cfg, Some(&ok), &wd).unwrap_err();
         assert!(err.kind == FailureKind::RobotFault && err.detail.contains("watchdog"), "{err:?}");
+        // Up before the first reading: the previous commander's, not this daemon's; it stays
+        // no fault while it stays up, and is one when it comes back after a move cleared it.
+        assert_eq!(check_robot(&cfg, None, &wd), Ok(()));
+        let still_up = RobotState { seq: 3, time_ns: 30, ..wd };
+        assert_eq!(check_robot(&cfg, Some(&wd), &still_up), Ok(()));
         let far = state([5.0, 0.0, 0.2]);
         let err = check_robot(&cfg, None, &far).unwrap_err();
         assert!(err.kind == FailureKind::RobotState && err.detail.contains("outside the workspace"), "{err:?}");

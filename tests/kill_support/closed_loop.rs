@@ -295,9 +295,11 @@ fn kill_daemon(r: &mut Running, result: &mut CaseResult) {
     let dead_seq = r.listener.last_state.map_or(0, |s| s.last_command_seq);
     r.daemon = start_daemon(&r.domain.0, &r.hint);
     let took = poll(Duration::from_secs(60), || r.listener.drain_states().into_iter().find(|s| s.last_command_seq != dead_seq));
-    result.restart_ok = took.is_some();
-    // What it made of the arm the dead daemon left behind.
-    if poll(Duration::from_millis(500), || r.daemon.child.try_wait().unwrap()).is_some() {
+    // What it made of the arm the dead daemon left behind: it must take over, not stop at
+    // once (the dead daemon's watchdog stop is not its fault).
+    let stopped_at_once = poll(Duration::from_millis(500), || r.daemon.child.try_wait().unwrap()).is_some();
+    result.restart_ok = took.is_some() && !stopped_at_once;
+    if stopped_at_once {
         let fresh = std::mem::replace(&mut r.daemon, Proc::spawn("true", Command::new("true")));
         let (_, out, err) = fresh.finish(Duration::from_secs(10));
         let reason = out.lines().rev().find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()).map(|v| v["failure_reason"].to_string());
