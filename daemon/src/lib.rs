@@ -9,6 +9,7 @@
 //! [`worker`] thread; report images are encoded on another ([`report`]). [`service`] runs it
 //! all against the `handeye/*` services of a domain, whoever publishes them.
 
+pub mod camera_clock;
 pub mod config;
 pub mod fault;
 pub mod gripper;
@@ -23,6 +24,7 @@ pub mod safety;
 pub mod service;
 pub mod servo_plot;
 pub mod timing;
+pub mod track_search;
 pub mod worker;
 
 pub use config::DaemonConfig;

@@ -114,7 +114,7 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                         MessageEvent::Interrupted => break,
                     }
                 }
-                let out = hl.cycle(frame.frame_id(), &left, &right);
+                let out = hl.cycle(frame.frame_id(), frame.header().capture_time_ns, &left, &right);
                 let loop_ns = monotonic_ns().saturating_sub(receive_ns);
                 let t = *hl.finish_cycle(loop_ns);
                 send(&mut commands, &mut telemetry, &out.command, &t)?;
