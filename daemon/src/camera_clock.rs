@@ -80,6 +80,8 @@ pub struct CameraClock {
     last: Option<(u64, u64)>,
     /// Whether the previous frame's stamp was believed.
     last_believed: bool,
+    /// [`Self::restart`] was called: the next frame starts a new stream.
+    restart_pending: bool,
     now_ns: u64,
     periods: [u64; PERIODS],
     period_count: usize,
@@ -97,6 +99,7 @@ impl CameraClock {
             nominal_period_ns: nominal_period_ns.max(1),
             last: None,
             last_believed: true,
+            restart_pending: false,
             now_ns: 0,
             periods: [0; PERIODS],
             period_count: 0,
@@ -131,10 +134,11 @@ impl CameraClock {
             let tick = FrameTick { now_ns: 0, dt_s: self.period_ns() as f64 * 1e-9, dropped: 0, bad_stamp: false };
             return tick;
         };
-        if frame_id <= last_id {
+        if std::mem::take(&mut self.restart_pending) | (frame_id <= last_id) {
             // A new publisher numbering from its own start: one period on, nothing dropped.
             self.stats.stream_restarts += 1;
             self.last = Some((frame_id, capture_time_ns));
+            self.last_believed = true;
             return self.advance(self.period_ns(), 1, 0, false);
         }
         let gap = frame_id - last_id;
@@ -169,6 +173,12 @@ impl CameraClock {
         self.ids_spanned += gap;
         self.dt.record_ns(step_ns);
         FrameTick { now_ns: self.now_ns, dt_s: step_ns as f64 * 1e-9, dropped, bad_stamp }
+    }
+
+    /// The stream went away: the next frame starts a new one (its step is one measured
+    /// period; a gap in its id or stamp from the last frame is neither a drop nor bad).
+    pub fn restart(&mut self) {
+        self.restart_pending = self.last.is_some();
     }
 
     /// The counts and rates so far.
@@ -254,5 +264,10 @@ mod tests {
         let t = c.tick(1, 9 + P);
         assert!(!t.bad_stamp && (t.dt_s - P as f64 * 1e-9).abs() < 1e-6, "{t:?}");
         assert_eq!((c.stats().stream_restarts, c.stats().dropped_frames), (1, 0));
+        // A camera that comes back after a while with its ids and stamps further on.
+        c.restart();
+        let t = c.tick(500, 9 + 20 * 1_000_000_000);
+        assert!(!t.bad_stamp && t.dropped == 0 && (t.dt_s - P as f64 * 1e-9).abs() < 1e-6, "{t:?}");
+        assert_eq!(c.stats().stream_restarts, 2);
     }
 }

@@ -4,6 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
+use handeye_daemon::observe::service::{run as run_observe, ObserveServiceOptions};
+use handeye_daemon::stereo_model::StereoModelFile;
+use handeye_daemon::observe::ObserveOptions;
 use handeye_daemon::service::{run as run_service, ServiceOptions};
 use handeye_daemon::{DaemonConfig, OperatorHint};
 
@@ -27,10 +30,28 @@ use super::domain::DomainArgs;
 /// look-and-move) → grasp → lift → done; or failed / stopped with a reason. Exit status 0
 /// when done, 2 when failed or stopped.
 ///
+/// With --observe it only watches: no robot is needed and no command is ever sent (the
+/// command service is not even opened). It acquires the target (and with --gripper-hint
+/// the gripper plate) from the hints, tracks them in both views (the left one with --mono),
+/// checks the views against --stereo-model if given, and publishes telemetry every frame:
+/// corners, confidence, state (a lost track is searched for and picked up when it
+/// reappears), reason, tracker update time. A camera that goes away is reported ("camera
+/// gone") within stale_frame_ms, and the daemon waits for it to come back. It ends on
+/// Ctrl-C or SIGTERM (exit 0), or --end-after-gone-s after the camera left; --out writes
+/// observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
+///
+/// Every time-out and the tracker's time step are camera time: the frames' capture stamps
+/// (a gap in the frame ids is counted as dropped frames; daemon.json "camera").
+///
 /// Examples:
 ///   handeye daemon --point-m 0.43,0.05 --out out/report
 ///   handeye daemon --hint out/hint.json --out out/report
 ///   handeye daemon --domain lab --config daemon.toml --point-m 0.40,-0.02,0.06 --json
+///   # watch a face of the cube, one camera, report into obs/ (stop with Ctrl-C)
+///   handeye feed --mono --dir ../shared/data/visp-cube --loop &
+///   handeye daemon --observe --mono --hint top-face.json --out obs
+///   # two cameras, target and gripper, views checked against a calibrated stereo model
+///   handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json
 #[derive(Args)]
 pub struct DaemonArgs {
     /// Configuration (TOML): gripper model, calibration cage in robot coordinates, gains,
@@ -64,6 +85,28 @@ pub struct DaemonArgs {
     /// Print the effective configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
+    /// Observe only: no robot, no commands; track the --hint target (and --gripper-hint
+    /// plate) and publish telemetry every frame until stopped.
+    #[arg(long, requires = "hint", conflicts_with = "point_m")]
+    observe: bool,
+    /// With --observe: the gripper plate's outline in both views (hint.json format; its
+    /// depth_mm is not used).
+    #[arg(long, value_name = "FILE", requires = "observe")]
+    gripper_hint: Option<PathBuf>,
+    /// With --observe: the stream's two views are one camera (`feed --mono`, `camera
+    /// --mono`): track the left view only (the hint's left_px).
+    #[arg(long, requires = "observe")]
+    mono: bool,
+    /// With --observe: the camera pair's stereo model (stereo_model.json, written by a
+    /// calibrated run into its --out folder): the two views' tracks are checked against its
+    /// epipolar constraint (telemetry says when they disagree by more than
+    /// target.max_epipolar_px; observe.json "epipolar").
+    #[arg(long, value_name = "FILE", requires = "observe", conflicts_with = "mono")]
+    stereo_model: Option<PathBuf>,
+    /// With --observe: end when the camera has been gone this long (the stream ended);
+    /// without it, run until Ctrl-C / SIGTERM.
+    #[arg(long, value_name = "S", requires = "observe", value_parser = super::units::parse_seconds)]
+    end_after_gone_s: Option<f64>,
     #[command(flatten)]
     domain: DomainArgs,
 }
@@ -78,6 +121,9 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         return Ok(());
     }
     let hint = args.hint.as_deref().map(OperatorHint::load).transpose()?;
+    if args.observe {
+        return observe(&args, config, hint);
+    }
     if !args.json {
         eprintln!("daemon: waiting for frames in domain '{}'", args.domain.domain);
     }
@@ -115,6 +161,47 @@ pub fn run(args: DaemonArgs) -> Result<()> {
     }
     if !o.end.success {
         std::process::exit(2);
+    }
+    Ok(())
+}
+
+/// `handeye daemon --observe`.
+fn observe(args: &DaemonArgs, config: DaemonConfig, hint: Option<OperatorHint>) -> Result<()> {
+    let hint = hint.context("--observe needs --hint")?;
+    let gripper_hint = args.gripper_hint.as_deref().map(OperatorHint::load).transpose()?;
+    let epipolar = args.stereo_model.as_deref().map(StereoModelFile::load).transpose()?.map(|m| m.epipolar());
+    if !args.json {
+        eprintln!("daemon: observing in domain '{}' (no robot, no commands); Ctrl-C ends it", args.domain.domain);
+    }
+    let result = run_observe(ObserveServiceOptions {
+        domain: args.domain.domain.clone(),
+        config,
+        observe: ObserveOptions { hint, gripper_hint, mono: args.mono, epipolar },
+        report_dir: args.out.clone(),
+        end_after_gone: args.end_after_gone_s.map(std::time::Duration::from_secs_f64),
+    })?;
+    for e in &result.report_errors {
+        eprintln!("daemon: report: {e}");
+    }
+    let r = &result.report;
+    if args.json {
+        println!("{}", serde_json::to_string(r)?);
+    } else {
+        let trackers: Vec<String> = r
+            .trackers
+            .iter()
+            .map(|t| format!("{} tracked {} lost {} ({} losses, {} re-found)", t.name, t.tracked_frames, t.lost_frames, t.losses.len(), t.refinds.len()))
+            .collect();
+        println!(
+            "daemon: observed {} frames ({}), {} dropped, camera {:.1} frames/s; {}; tracker update p50 {:.0} µs, p99 {:.0} µs",
+            r.frames,
+            r.end,
+            r.camera.dropped_frames,
+            r.camera.camera_rate_hz,
+            trackers.join("; "),
+            r.tracker_update.us_p50,
+            r.tracker_update.us_p99
+        );
     }
     Ok(())
 }

@@ -278,6 +278,8 @@ pub enum Phase {
     Done = 8,
     Failed = 9,
     Stopped = 10,
+    /// `handeye daemon --observe`: tracking only, no robot, no commands.
+    Observe = 11,
 }
 
 impl Phase {
@@ -294,6 +296,7 @@ impl Phase {
             8 => Self::Done,
             9 => Self::Failed,
             10 => Self::Stopped,
+            11 => Self::Observe,
             _ => return None,
         })
     }
@@ -311,6 +314,7 @@ impl Phase {
             Self::Done => "done",
             Self::Failed => "failed",
             Self::Stopped => "stopped",
+            Self::Observe => "observe",
         }
     }
 }
