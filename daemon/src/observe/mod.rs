@@ -223,8 +223,12 @@ impl ObserveLoop {
         }
         let lost: Vec<&str> = SLOTS.iter().zip(&self.watches).filter(|(_, w)| w.is_lost()).map(|(s, _)| s.2).collect();
         let acquiring = self.watches.iter().any(|w| matches!(w.state, watch::WatchState::Acquiring { .. }));
+        let confirming: Vec<&str> =
+            SLOTS.iter().zip(&self.watches).filter(|(_, w)| matches!(w.state, watch::WatchState::Confirming { .. })).map(|(s, _)| s.2).collect();
         let mut reason = if !lost.is_empty() {
             format!("lost: {} (searching)", lost.join(", "))
+        } else if !confirming.is_empty() {
+            format!("found again, confirming: {}", confirming.join(", "))
         } else if acquiring {
             "acquiring from the hint".to_string()
         } else {

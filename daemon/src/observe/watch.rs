@@ -15,6 +15,11 @@ use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
 pub const CONFIRM_FRAMES: u32 = 6;
 /// Confidence a search candidate needs to be taken.
 pub const FOUND_SCORE: f64 = 0.6;
+/// How a lost contour is searched for: the tracker's default grid, and a looser size check
+/// than the plate's (a hand-held camera changes a face's size between losing and finding
+/// it; the plate's dark border, which the default guards against, is not in play here).
+const SEARCH: SearchSettings = SearchSettings { max_shift_px: 160.0, step_px: 10.0, candidates_per_frame: 120, max_area_ratio: 1.5, good_enough_score: 0.8 };
+
 /// Largest predicted shift a search is centred on, px (the prediction grows with the time
 /// lost; past this it is a guess).
 const MAX_PREDICTED_SHIFT_PX: f64 = 120.0;
@@ -168,7 +173,7 @@ impl TrackWatch {
                         // predicts it and where it was last seen.
                         *searches += 1;
                         let centre = if *searches % 2 == 0 { predicted } else { Vector2::zeros() };
-                        **search = ShiftSearch::new(SearchSettings::default(), search.frame(), centre);
+                        **search = ShiftSearch::new(SEARCH, search.frame(), centre);
                     }
                 }
                 None
@@ -208,7 +213,7 @@ impl TrackWatch {
             self.counts.losses.push(frame_id);
         }
         let frame = self.last_good.map_or_else(|| tracker.frame(), |(f, _)| f);
-        let search = ShiftSearch::new(SearchSettings::default(), frame, self.predicted_shift_px(now_ns));
+        let search = ShiftSearch::new(SEARCH, frame, self.predicted_shift_px(now_ns));
         self.state = WatchState::Lost { search: Box::new(search), searches: 0 };
     }
 }
