@@ -71,12 +71,16 @@ pub struct DaemonArgs {
     point_m: Option<[f64; 3]>,
     /// Report folder: overlay PNGs of both views at key moments (trackers drawn), the plan
     /// (NN_plan.png: facets, grasp sites, the chosen one; plan.json), the servo error plot
-    /// (servo_convergence.svg) and daemon.json (the outcome).
+    /// (servo_convergence.svg), stereo_model.json (the calibrated camera model, for
+    /// --observe --stereo-model) and daemon.json (the outcome). With --observe:
+    /// observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Print the outcome as one JSON object: success, phase_reached, final_phase,
     /// failure_reason, servo_steps, loop_us_p50/p99/max/mean, deadline_misses, cycles,
-    /// tracker_update (us_p50/p99/max/mean, cycles: the trackers' own update time), calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), target_source
+    /// tracker_update (us_p50/p99/max/mean, cycles: the trackers' own update time), camera
+    /// (frames, dropped_frames, bad_stamps, camera_rate_hz, dt_ms_p50/max: from the capture
+    /// stamps), calibration (residual_rms_px, epipolar_rms_px, disparity_range_px), target_source
     /// (hint or plan), plan (facets, candidates, chosen site, rejected sites and counts by
     /// reason, planner_ms), planning (frames answered and gripper tracker updates while the
     /// planner worked), servo_trace, wall_s.
