@@ -10,7 +10,7 @@ use iceoryx2::prelude::*;
 
 /// Version of the wire contract. Bumped on any change to a type in this module; a receiver
 /// rejects samples of any other version.
-pub const WIRE_VERSION: u32 = 2;
+pub const WIRE_VERSION: u32 = 3;
 
 /// Service names (iceoryx2). The same names are used for the matching event services that
 /// wake subscribers (see `wire/README.md`).
@@ -447,10 +447,10 @@ mod tests {
         }
         assert_eq!(CommandKind::from_u32(5), None);
         assert_eq!(PixelFormat::from_u32(0), None);
-        for p in 0..11 {
+        for p in 0..12 {
             assert_eq!(Phase::from_u32(p).map(|x| x as u32), Some(p));
         }
-        assert_eq!(Phase::from_u32(11), None);
+        assert_eq!(Phase::from_u32(12), None);
     }
 
     #[test]
