@@ -447,3 +447,52 @@ impl HardLoop {
         self.robot_states
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+
+    /// Runs frames `(id, capture_time_ns)` with no robot state; the index of the frame at
+    /// which the run stopped, if it did.
+    fn stop_frame(frames: &[(u64, u64)]) -> (Option<usize>, HardLoop) {
+        let mut hl = HardLoop::new(DaemonConfig::default(), None).unwrap();
+        let img = ImageBuf::filled(64, 48, 100);
+        for (i, &(id, t)) in frames.iter().enumerate() {
+            hl.cycle(id, t, &img.view(), &img.view());
+            if hl.phase() == Phase::Stopped {
+                assert_eq!(hl.failure().map(|f| f.detail.as_str()), Some("no robot state received"));
+                return (Some(i), hl);
+            }
+        }
+        (None, hl)
+    }
+
+    #[test]
+    fn time_outs_run_on_the_capture_stamps_not_on_frame_counts() {
+        // safety.state_stale_ms = 200: a 30 Hz camera reaches it at its 7th frame (200 ms)...
+        let t0 = 5_000_000_000;
+        let at_30hz: Vec<(u64, u64)> = (0..10).map(|i| (i, t0 + i * 33_333_333)).collect();
+        assert_eq!(stop_frame(&at_30hz).0, Some(6));
+        // ... a 10 Hz camera at its 3rd, whatever frame_rate_hz says.
+        let at_10hz: Vec<(u64, u64)> = (0..10).map(|i| (i, t0 + i * 100_000_000)).collect();
+        assert_eq!(stop_frame(&at_10hz).0, Some(2));
+        // Every other frame dropped at 30 Hz: the ids skip, the time is the stamps' (frame
+        // id 6 at 200 ms is the 4th frame received), and the drops are counted.
+        let gapped: Vec<(u64, u64)> = (0..10).map(|i| (2 * i, t0 + 2 * i * 33_333_333)).collect();
+        let (stopped, hl) = stop_frame(&gapped);
+        assert_eq!(stopped, Some(3));
+        let c = hl.clock();
+        assert_eq!((c.frames, c.dropped_frames), (4, 3));
+        assert!((c.dt_ms_max - 66.7).abs() < 0.1, "{c:?}");
+        // Stamps that go back are not believed: the clock goes on by the measured period,
+        // so the time-out still comes (at 30 Hz frames: the 7th).
+        let mut stuck = at_30hz.clone();
+        for f in stuck.iter_mut().skip(3) {
+            f.1 = t0;
+        }
+        let (stopped, hl) = stop_frame(&stuck);
+        assert_eq!(stopped, Some(6));
+        assert_eq!(hl.clock().bad_stamps, 4);
+    }
+}
