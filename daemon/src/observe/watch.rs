@@ -217,3 +217,52 @@ impl TrackWatch {
         self.state = WatchState::Lost { search: Box::new(search), searches: 0 };
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::tracker::TrackerConfig;
+
+    fn square_at(dx: usize, dy: usize) -> ImageBuf {
+        let mut img = ImageBuf::filled(320, 240, 200);
+        for y in 60 + dy..100 + dy {
+            for x in 60 + dx..100 + dx {
+                img.set(x, y, 50);
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn a_contour_is_acquired_lost_while_hidden_and_found_again_where_it_reappears() {
+        let square = [[58.0, 61.0], [101.0, 59.0], [99.5, 99.5], [59.5, 101.0]];
+        let mut t = ContourTracker::new(TrackerConfig::default(), &square).unwrap();
+        let mut w = TrackWatch::acquiring("target_left", 6, 0.5);
+        let (mut frame_id, mut now) = (0u64, 0u64);
+        let mut run = |t: &mut ContourTracker, w: &mut TrackWatch, img: &ImageBuf| {
+            frame_id += 1;
+            now += 33_333_333;
+            let state = w.runs().then(|| t.update(&img.view(), 0.033));
+            w.step(t, state.as_ref(), &img.view(), frame_id, now)
+        };
+        let seen = square_at(0, 0);
+        let events: Vec<_> = (0..8).filter_map(|_| run(&mut t, &mut w, &seen)).collect();
+        assert_eq!(events, vec![WatchEvent::Acquired]);
+        assert_eq!(w.counts.acquired_frame_id, Some(6));
+        // Hidden for ten frames: lost at once, searched for, reported lost meanwhile.
+        let blank = ImageBuf::filled(320, 240, 200);
+        let events: Vec<_> = (0..10).filter_map(|_| run(&mut t, &mut w, &blank)).collect();
+        assert_eq!(events, vec![WatchEvent::Lost]);
+        assert!(w.is_lost() && w.telemetry_state() == 2);
+        // It reappears 70 px to the right: found, confirmed, tracking there.
+        let moved = square_at(70, 10);
+        let events: Vec<_> = (0..30).filter_map(|_| run(&mut t, &mut w, &moved)).collect();
+        assert_eq!(events, vec![WatchEvent::Refound]);
+        assert!(matches!(w.state, WatchState::Tracking));
+        let c = t.corners().next().unwrap();
+        assert!((c.x - 129.5).abs() < 1.5 && (c.y - 69.5).abs() < 1.5, "{c:?}");
+        assert_eq!((w.counts.losses.len(), w.counts.refinds.len()), (1, 1));
+        assert!(w.counts.lost_frames >= 10, "{:?}", w.counts);
+    }
+}
