@@ -92,7 +92,7 @@ impl ObserveLoop {
                 if options.mono && view == View::Right {
                     continue;
                 }
-                let t = ContourTracker::new(tracker_cfg.clone(), poly).map_err(|e| ObserveError { which, view: side, detail: e.to_string() })?;
+                let t = ContourTracker::new(tracker_cfg, poly).map_err(|e| ObserveError { which, view: side, detail: e.to_string() })?;
                 trackers.insert(role, view, t);
                 let slot = SLOTS.iter().position(|s| s.0 == role && s.1 == view).unwrap_or(0);
                 watches[slot] = TrackWatch::acquiring(SLOTS[slot].2, converge, min);
@@ -309,5 +309,92 @@ impl ObserveLoop {
             end: end.to_string(),
             wall_s,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use nalgebra::Vector4;
+
+    /// A dark square (the target) at `(x, y)` and a bright plate in a dark border (the
+    /// gripper) above it.
+    fn view(x: usize, y: usize) -> ImageBuf {
+        let mut img = ImageBuf::filled(320, 240, 150);
+        let mut rect = |x0: usize, y0: usize, x1: usize, y1: usize, v: u8| {
+            for yy in y0..y1 {
+                for xx in x0..x1 {
+                    img.set(xx, yy, v);
+                }
+            }
+        };
+        rect(x, y, x + 40, y + 40, 40);
+        rect(x - 8, 20, x + 48, 80, 10);
+        rect(x, 28, x + 40, 72, 230);
+        img
+    }
+
+    fn square(x: f64, y: f64, size: f64) -> Vec<[f64; 2]> {
+        vec![[x - 0.5, y - 0.5], [x + size - 0.5, y - 0.5], [x + size - 0.5, y + size - 0.5], [x - 0.5, y + size - 0.5]]
+    }
+
+    fn hint(l: Vec<[f64; 2]>, r: Vec<[f64; 2]>) -> OperatorHint {
+        OperatorHint { version: 1, left_px: l, right_px: r, depth_mm: 40.0, note: String::new() }
+    }
+
+    /// Rectified views: a point's rows agree (`v' = v`).
+    fn same_rows() -> EpipolarConstraint {
+        EpipolarConstraint::from_normal(Vector4::new(0.0, 1.0, 0.0, -1.0), 0.0)
+    }
+
+    fn run(left: &ImageBuf, right: &ImageBuf, dy_right: f64) -> (ObserveLoop, Vec<Telemetry>) {
+        let options = ObserveOptions {
+            hint: hint(square(120.0, 140.0, 40.0), square(100.0, 140.0 + dy_right, 40.0)),
+            gripper_hint: Some(hint(square(120.0, 28.0, 40.0), square(100.0, 28.0 + dy_right, 40.0))),
+            mono: false,
+            epipolar: Some(same_rows()),
+        };
+        let mut ol = ObserveLoop::new(DaemonConfig::default(), options).unwrap();
+        let mut seen = Vec::new();
+        for i in 0..30u64 {
+            ol.cycle(i, 1_000 + i * 33_333_333, &left.view(), &right.view());
+            seen.push(*ol.finish_cycle(1));
+        }
+        (ol, seen)
+    }
+
+    #[test]
+    fn both_roles_are_tracked_in_both_views_and_checked_against_the_stereo_model() {
+        // The right view sees everything 20 px to the left, on the same rows.
+        let (left, right) = (view(120, 140), view(100, 140));
+        let (ol, seen) = run(&left, &right, 0.0);
+        let last = seen.last().unwrap();
+        assert_eq!(last.phase, Phase::Observe as u32);
+        assert_eq!(last.tracker_state, [1, 1, 1, 1], "{:?}", last.reason_text());
+        assert_eq!(last.reason_text(), "tracking");
+        assert!(last.tracker_update_ns.iter().all(|&ns| ns > 0));
+        let r = ol.report(1.0, "stream ended");
+        let e = r.epipolar.unwrap();
+        assert!(e.frames > 0 && e.over_limit_frames == 0 && e.rms_px_max.unwrap() < 1.0, "{e:?}");
+        assert_eq!(r.trackers.len(), 4);
+        assert!(r.trackers.iter().all(|t| t.acquired_frame_id.is_some() && t.lost_frames == 0), "{:?}", r.trackers);
+
+        // The right camera 20 px lower: each view tracks, but they are not the same rows.
+        let right_low = {
+            let mut img = ImageBuf::filled(320, 240, 150);
+            let src = view(100, 140);
+            for y in 20..240 {
+                for x in 0..320 {
+                    img.set(x, y, src.view().get(x, y - 20));
+                }
+            }
+            img
+        };
+        let (ol, seen) = run(&left, &right_low, 20.0);
+        let last = seen.last().unwrap();
+        assert_eq!(last.tracker_state[2..], [1, 1]);
+        assert!(last.reason_text().contains("views disagree"), "{}", last.reason_text());
+        assert!(ol.report(1.0, "x").epipolar.unwrap().over_limit_frames > 0);
     }
 }
