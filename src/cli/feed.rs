@@ -298,7 +298,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
         let stamp = clock.as_ref().map(|c| c.stamp(index, pass));
         index += 1;
         taken += 1;
-        if args.drop_every > 0 && taken % args.drop_every == 0 {
+        if args.drop_every > 0 && taken.is_multiple_of(args.drop_every) {
             // Lost like a camera's frame: its slot passes (paced rates), its id is skipped.
             dropped += 1;
             if let Some(period) = period {
