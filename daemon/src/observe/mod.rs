@@ -35,6 +35,9 @@ const SLOTS: [(Role, View, &str); 4] = [
     (Role::Target, View::Right, "target_right"),
 ];
 
+/// Rows the plot keeps at most.
+const MAX_SERIES_ROWS: usize = 20_000;
+
 /// What observe mode is given besides the daemon's configuration.
 #[derive(Debug, Clone)]
 pub struct ObserveOptions {
@@ -68,9 +71,14 @@ pub struct ObserveLoop {
     telemetry: Telemetry,
     loop_timing: LatencyHistogram,
     tracker_timing: LatencyHistogram,
-    /// Per frame: camera time, confidences, update time (for the plot).
+    /// Every `series_stride`-th frame: camera time, confidences, update time (for the
+    /// plot). Thinned to every other row whenever it reaches [`MAX_SERIES_ROWS`], so a
+    /// day-long run keeps a bounded plot.
     series: Vec<SeriesRow>,
-    epipolar_rms_px: Vec<f64>,
+    series_stride: u64,
+    /// RMS epipolar residual per checked frame, in thousandths of a pixel (a fixed
+    /// histogram: no growth with the run's length).
+    epipolar_mpx: LatencyHistogram,
     epipolar_over: u64,
     camera_gone: u32,
     frames: u64,
@@ -110,7 +118,8 @@ impl ObserveLoop {
             loop_timing: LatencyHistogram::new(deadline_ns),
             tracker_timing: LatencyHistogram::new(u64::MAX),
             series: Vec::new(),
-            epipolar_rms_px: Vec::new(),
+            series_stride: 1,
+            epipolar_mpx: LatencyHistogram::new(u64::MAX),
             epipolar_over: 0,
             camera_gone: 0,
             frames: 0,
@@ -150,18 +159,22 @@ impl ObserveLoop {
         if update_sum > 0 {
             self.tracker_timing.record_ns(update_sum);
         }
-        self.series.push(SeriesRow {
-            frame_id,
-            time_s: tick.now_ns as f64 * 1e-9,
-            confidence: SLOTS.map(|_| f64::NAN),
-            update_us: update_sum as f64 * 1e-3,
-        });
-        if let Some(row) = self.series.last_mut() {
+        if self.frames.is_multiple_of(self.series_stride) {
+            if self.series.len() >= MAX_SERIES_ROWS {
+                let mut keep = false;
+                self.series.retain(|_| {
+                    keep = !keep;
+                    keep
+                });
+                self.series_stride *= 2;
+            }
+            let mut confidence = SLOTS.map(|_| f64::NAN);
             for (i, w) in self.watches.iter().enumerate() {
                 if w.telemetry_state() != 0 {
-                    row.confidence[i] = if w.is_lost() { 0.0 } else { f64::from(self.telemetry.tracker_confidence[i]) };
+                    confidence[i] = if w.is_lost() { 0.0 } else { f64::from(self.telemetry.tracker_confidence[i]) };
                 }
             }
+            self.series.push(SeriesRow { frame_id, time_s: tick.now_ns as f64 * 1e-9, confidence, update_us: update_sum as f64 * 1e-3 });
         }
         moment
     }
@@ -190,7 +203,7 @@ impl ObserveLoop {
             }
         }
         if let Some(rms) = worst {
-            self.epipolar_rms_px.push(rms);
+            self.epipolar_mpx.record_ns((rms * 1e3).round().min(u64::MAX as f64) as u64);
             if rms > self.cfg.target.max_epipolar_px {
                 self.epipolar_over += 1;
             }
@@ -283,8 +296,8 @@ impl ObserveLoop {
     pub fn report(&self, wall_s: f64, end: &str) -> ObserveReport {
         let tt = &self.tracker_timing;
         let us = |ns: u64| ns as f64 / 1000.0;
-        let mut rms = self.epipolar_rms_px.clone();
-        rms.sort_by(f64::total_cmp);
+        let e = &self.epipolar_mpx;
+        let px = |mpx: u64| (e.count() > 0).then_some(mpx as f64 * 1e-3);
         ObserveReport {
             frames: self.frames,
             camera: self.clock.stats(),
@@ -300,9 +313,9 @@ impl ObserveLoop {
             loop_us_p50: us(self.loop_timing.percentile_ns(50.0)),
             loop_us_p99: us(self.loop_timing.percentile_ns(99.0)),
             epipolar: self.epipolar.map(|_| EpipolarStats {
-                frames: rms.len() as u64,
-                rms_px_p50: rms.get(rms.len() / 2).copied(),
-                rms_px_max: rms.last().copied(),
+                frames: e.count(),
+                rms_px_p50: px(e.percentile_ns(50.0)),
+                rms_px_max: px(e.max_ns()),
                 limit_px: self.cfg.target.max_epipolar_px,
                 over_limit_frames: self.epipolar_over,
             }),
