@@ -103,6 +103,7 @@ fn check_tracked_throughout(o: &Observed, expected_drops_at_least: u64) {
     let gaps: u64 = ids.windows(2).map(|w| w[1] - w[0] - 1).sum();
     let dropped = r["camera"]["dropped_frames"].as_u64().unwrap();
     assert_eq!(dropped, gaps, "drops counted = gaps in the ids the daemon saw");
+    assert_eq!(o.frames.last().unwrap()["dropped_frames"].as_u64(), Some(dropped), "telemetry counts the drops too");
     assert!(dropped >= expected_drops_at_least, "{dropped} drops counted, the feeder dropped {expected_drops_at_least}");
     assert_eq!((ids[0], *ids.last().unwrap()), (0, FRAMES - 1), "first and last frame seen");
     assert_eq!(frames + dropped, FRAMES, "every frame answered or counted as dropped");

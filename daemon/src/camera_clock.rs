@@ -181,6 +181,11 @@ impl CameraClock {
         self.restart_pending = self.last.is_some();
     }
 
+    /// Frame ids skipped so far (cheap: for every cycle's telemetry).
+    pub fn dropped_frames(&self) -> u64 {
+        self.stats.dropped_frames
+    }
+
     /// The counts and rates so far.
     pub fn stats(&self) -> ClockStats {
         let span_s = self.now_ns as f64 * 1e-9;

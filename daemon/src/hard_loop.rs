@@ -302,6 +302,7 @@ impl HardLoop {
             *dst = if in_servo && src.is_finite() { src as f32 } else { f32::NAN };
         }
         t.servo_steps = self.mission.servo.steps();
+        t.dropped_frames = self.clock.dropped_frames();
         t.planning = u32::from(self.mission.worker.busy());
         match &self.failure {
             Some(failure) => t.set_reason(&failure.detail),

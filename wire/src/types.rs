@@ -365,6 +365,9 @@ pub struct Telemetry {
     pub planning: u32,
     /// Human-readable status or failure reason, UTF-8, NUL-padded.
     pub reason: [u8; REASON_LEN],
+    /// Frames dropped before reaching the daemon so far: the gaps in the frame ids it saw
+    /// (since version 3).
+    pub dropped_frames: u64,
 }
 
 impl Default for Telemetry {
@@ -385,6 +388,7 @@ impl Default for Telemetry {
             servo_steps: 0,
             planning: 0,
             reason: [0; REASON_LEN],
+            dropped_frames: 0,
         }
     }
 }
@@ -427,7 +431,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<StereoHeader>(), 4 * 2 + 8 * 3 + 4 * 4);
         assert_eq!(std::mem::size_of::<RobotState>(), 4 * 2 + 8 * 4 + 4 * (3 + 1 + 5 + 1 + 2));
         assert_eq!(std::mem::size_of::<RobotCommand>(), 4 * 2 + 8 * 3 + 4 * (3 + 1 + 1 + 1));
-        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96);
+        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96 + 8);
     }
 
     #[test]

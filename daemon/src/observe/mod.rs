@@ -215,6 +215,7 @@ impl ObserveLoop {
         let t = &mut self.telemetry;
         t.phase = Phase::Observe as u32;
         t.frame_id = frame_id;
+        t.dropped_frames = self.clock.dropped_frames();
         for (i, &(role, view, _)) in SLOTS.iter().enumerate() {
             let w = &self.watches[i];
             t.tracker_state[i] = w.telemetry_state();
