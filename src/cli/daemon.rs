@@ -12,47 +12,53 @@ use handeye_daemon::{DaemonConfig, OperatorHint};
 
 use super::domain::DomainArgs;
 
-/// Run the hard-loop daemon: track the gripper and the target in both views, calibrate,
-/// servo the gripper plate coplanar with the target facet, grasp and lift.
-///
-/// It joins a domain's services (handeye/stereo and handeye/robot/state in,
-/// handeye/robot/command and handeye/telemetry out) and cannot tell a simulator from real
-/// cameras and a robot. It answers every stereo frame with one command stamped with that
-/// frame's id (Hold when there is nothing to do), publishes telemetry every cycle, and stops
-/// the arm with an explicit Stop when a tracker it needs is lost, no frame arrives for
-/// stale_frame_ms (default 100 ms), the camera or robot goes away, or the robot faults.
-///
-/// Phases: acquire_gripper (open/close the jaws, locate the fingers, track the plate) →
-/// calibrate (visit the cage, fit the affine stereo model) → plan (one stereo pair to the
-/// planner on a worker thread, the gripper masked out and still tracked at frame rate:
-/// facets, grasp sites, the site nearest --point-m chosen; skipped with --hint) →
-/// acquire_target (trackers on the chosen facet, or the hint's) → servo (coplanarity,
-/// look-and-move) → grasp → lift → done; or failed / stopped with a reason. Exit status 0
-/// when done, 2 when failed or stopped.
-///
-/// With --observe it only watches: no robot is needed and no command is ever sent (the
-/// command service is not even opened). It acquires the target (and with --gripper-hint
-/// the gripper plate) from the hints, tracks them in both views (the left one with --mono),
-/// checks the views against --stereo-model if given, and publishes telemetry every frame:
-/// corners, confidence, state (a lost track is searched for and picked up when it
-/// reappears), reason, tracker update time. A camera that goes away is reported ("camera
-/// gone") within stale_frame_ms, and the daemon waits for it to come back. It ends on
-/// Ctrl-C or SIGTERM (exit 0), or --end-after-gone-s after the camera left; --out writes
-/// observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
-///
-/// Every time-out and the tracker's time step are camera time: the frames' capture stamps
-/// (a gap in the frame ids is counted as dropped frames; daemon.json "camera").
-///
-/// Examples:
-///   handeye daemon --point-m 0.43,0.05 --out out/report
-///   handeye daemon --hint out/hint.json --out out/report
-///   handeye daemon --domain lab --config daemon.toml --point-m 0.40,-0.02,0.06 --json
-///   # watch a face of the cube, one camera, report into obs/ (stop with Ctrl-C)
-///   handeye feed --mono --dir ../shared/data/visp-cube --loop &
-///   handeye daemon --observe --mono --hint top-face.json --out obs
-///   # two cameras, target and gripper, views checked against a calibrated stereo model
-///   handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json
+/// `--help`'s text after the options (the one-line summary lives in main.rs, whose doc
+/// comment would replace a struct doc comment here).
+const DAEMON_HELP: &str = "\
+Run the hard-loop daemon: track the gripper and the target in both views, calibrate,
+servo the gripper plate coplanar with the target facet, grasp and lift.
+
+It joins a domain's services (handeye/stereo and handeye/robot/state in,
+handeye/robot/command and handeye/telemetry out) and cannot tell a simulator from real
+cameras and a robot. It answers every stereo frame with one command stamped with that
+frame's id (Hold when there is nothing to do), publishes telemetry every cycle, and stops
+the arm with an explicit Stop when a tracker it needs is lost, no frame arrives for
+stale_frame_ms (default 100 ms), the camera or robot goes away, or the robot faults.
+
+Phases: acquire_gripper (open/close the jaws, locate the fingers, track the plate) →
+calibrate (visit the cage, fit the affine stereo model) → plan (one stereo pair to the
+planner on a worker thread, the gripper masked out and still tracked at frame rate:
+facets, grasp sites, the site nearest --point-m chosen; skipped with --hint) →
+acquire_target (trackers on the chosen facet, or the hint's) → servo (coplanarity,
+look-and-move) → grasp → lift → done; or failed / stopped with a reason. Exit status 0
+when done, 2 when failed or stopped.
+
+With --observe it only watches: no robot is needed and no command is ever sent (the
+command service is not even opened). It acquires the target (and with --gripper-hint
+the gripper plate) from the hints, tracks them in both views (the left one with --mono),
+checks the views against --stereo-model if given, and publishes telemetry every frame:
+corners, confidence, state (a lost track is searched for and picked up when it
+reappears), reason, tracker update time. A camera that goes away is reported (\"camera
+gone\") within stale_frame_ms, and the daemon waits for it to come back. It ends on
+Ctrl-C or SIGTERM (exit 0), or --end-after-gone-s after the camera left; --out writes
+observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
+
+Every time-out and the tracker's time step are camera time: the frames' capture stamps
+(a gap in the frame ids is counted as dropped frames; daemon.json \"camera\").
+
+Examples:
+  handeye daemon --point-m 0.43,0.05 --out out/report
+  handeye daemon --hint out/hint.json --out out/report
+  handeye daemon --domain lab --config daemon.toml --point-m 0.40,-0.02,0.06 --json
+  # watch a face of the cube, one camera, report into obs/ (stop with Ctrl-C)
+  handeye feed --mono --dir ../shared/data/visp-cube --loop &
+  handeye daemon --observe --mono --hint top-face.json --out obs
+  # two cameras, target and gripper, views checked against a calibrated stereo model
+  handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json";
+
+/// The daemon's arguments; the help text is [`DAEMON_HELP`].
 #[derive(Args)]
+#[command(after_help = DAEMON_HELP)]
 pub struct DaemonArgs {
     /// Configuration (TOML): gripper model, calibration cage in robot coordinates, gains,
     /// time-outs. Every key is optional (defaults fit the simulator's arm); unknown keys are
