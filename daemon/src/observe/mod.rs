@@ -263,18 +263,18 @@ impl ObserveLoop {
         &self.telemetry
     }
 
-    /// The camera went away (no frame for a while, or its publisher left): the telemetry
-    /// saying so (no frame, no tracker updated). The trackers keep their last state; the
-    /// clock takes the next frame as a new stream.
-    pub fn camera_gone(&mut self, detail: &str, first_report: bool) -> Telemetry {
-        if first_report {
+    /// No frame came (none yet, or the camera went away): the telemetry saying `reason` (no
+    /// frame, no tracker updated). `gone_now`: the camera just went away: counted, and the
+    /// clock takes the next frame as a new stream. The trackers keep their last state.
+    pub fn no_frame(&mut self, reason: &str, gone_now: bool) -> Telemetry {
+        if gone_now {
             self.camera_gone += 1;
             self.clock.restart();
         }
         let t = &mut self.telemetry;
         t.frame_id = NO_FRAME;
         t.tracker_update_ns = [0; 4];
-        t.set_reason(&format!("camera gone: {detail}"));
+        t.set_reason(reason);
         t.time_ns = monotonic_ns();
         *t
     }

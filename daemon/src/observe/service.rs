@@ -4,7 +4,8 @@
 //!
 //! A camera that goes away — its publisher gone, or no frame for `stale_frame_ms` — is
 //! reported at once (telemetry reason `camera gone: ...` and a log line), then again every
-//! `stale_frame_ms` while it stays away; the daemon keeps running and picks the stream up
+//! `stale_frame_ms` while it stays away (before the first frame the reason says it waits
+//! for one); the daemon keeps running and picks the stream up
 //! when a publisher comes back (the subscriber stays attached to the service, and a new
 //! publisher's frames reach it). It ends on SIGINT/SIGTERM, or when the camera has been gone
 //! for `end_after_gone` (the stream ended).
@@ -53,8 +54,10 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
     let mut ol = ObserveLoop::new(options.config, options.observe).map_err(|e| ServiceError::Setup(e.to_string()))?;
     let mut got_frame = false;
     // Since when no camera has been there (`None`: frames are flowing).
-    let mut gone_since: Option<Instant> = Some(Instant::now());
+    let mut gone_since: Option<Instant> = None;
     let mut last_snapshot: Option<(ImageBuf2, Telemetry)> = None;
+    // Why the camera counts as gone (the first sign: its publisher left, or frames stopped).
+    let mut gone_reason = String::new();
     let end = loop {
         let event = frames.wait(stale).map_err(ServiceError::WaitFrames)?;
         match event {
@@ -91,24 +94,23 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
                 }
             }
             StereoEvent::Timeout | StereoEvent::PublisherGone => {
+                if !got_frame {
+                    // Before the first frame: say what it waits for, every stale period.
+                    telemetry.send(&ol.no_frame("waiting for the camera's first frame", false))?;
+                    continue;
+                }
                 let first = gone_since.is_none();
                 let since = *gone_since.get_or_insert_with(Instant::now);
-                let detail = if matches!(event, StereoEvent::PublisherGone) {
-                    "the camera's publisher went away".to_string()
-                } else if got_frame {
-                    format!("no frame for {} ms", stale.as_millis())
-                } else {
-                    "no frame yet".to_string()
-                };
-                if got_frame || !first {
-                    if first {
-                        tracing::warn!(%detail, "camera gone: still running, waiting for it to come back");
-                    }
-                    let t = ol.camera_gone(&detail, first && got_frame);
-                    telemetry.send(&t)?;
+                if first {
+                    gone_reason = if matches!(event, StereoEvent::PublisherGone) {
+                        "camera gone: its publisher went away".to_string()
+                    } else {
+                        format!("camera gone: no frame for {} ms", stale.as_millis())
+                    };
+                    tracing::warn!(reason = %gone_reason, "still running, waiting for the camera to come back");
                 }
+                telemetry.send(&ol.no_frame(&gone_reason, first))?;
                 if let Some(limit) = options.end_after_gone
-                    && got_frame
                     && since.elapsed() >= limit
                 {
                     break "stream ended";
