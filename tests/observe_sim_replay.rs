@@ -1,11 +1,12 @@
 //! `handeye daemon --observe` on a replayed simulator recording, judged against ground
 //! truth. The simulator runs a static scene in real time (pick_cube, no daemon, no driver:
-//! the arm stays parked, the target facet is never occluded) and writes the operator hint
-//! (`--hint-out`) and, beside the recording, the hinted facet's true corners in both views
-//! for every frame (`--truth-out`), which the daemon never sees. `handeye record` records
+//! the arm stays parked) and writes the operator hint (`--hint-out`) and, beside the
+//! recording, the hinted facet's true corners in both views and how many of its pixels
+//! something hides, for every frame (`--truth-out`), which the daemon never sees. `handeye record` records
 //! it; `handeye feed --dir --rate-hz recorded` replays it into the daemon in observe mode.
 //! From the frame each view's target tracker was verified on, its corners stay within
-//! 1.5 px of the true ones on every frame, in both views.
+//! 1.5 px of the true ones on every frame where the facet is unoccluded, in both views
+//! (here: every frame, which the truth confirms).
 
 mod e2e_support;
 mod wire_support;
@@ -114,12 +115,23 @@ fn observed_target_corners_stay_within_1_5_px_of_the_truth_in_both_views() {
 
     // 3. Every frame from acquisition on: both views tracking, corners on the truth.
     let samples: Vec<Value> = json_lines(&tel_path).into_iter().filter(|s| s["frame_id"].is_u64()).collect();
-    assert_eq!(samples.len(), recorded.len(), "telemetry for every replayed frame");
+    // Every replayed frame answered, or (a loaded machine) counted as dropped.
+    let ids: Vec<u64> = samples.iter().map(|s| s["frame_id"].as_u64().unwrap()).collect();
+    let recorded_ids: Vec<u64> = recorded.iter().map(|l| l["id"].as_u64().unwrap()).collect();
+    assert!(ids.iter().all(|id| recorded_ids.contains(id)), "telemetry answers replayed frames only");
+    let span = ids.last().unwrap() - ids[0] + 1;
+    assert_eq!(report["camera"]["dropped_frames"].as_u64(), Some(span - ids.len() as u64), "{}", report["camera"]);
+    if ids.len() < recorded.len() {
+        eprintln!("the daemon answered {} of {} replayed frames under this load", ids.len(), recorded.len());
+    }
     let mut judged = 0;
     let mut worst = [0.0f64; 2];
     for s in &samples {
         let id = s["frame_id"].as_u64().unwrap();
         let t = &truth[&id];
+        if t["occluded_px"] != serde_json::json!([0, 0]) {
+            continue;
+        }
         for (k, (slot, key)) in [(2, "left_px"), (3, "right_px")].into_iter().enumerate() {
             let tracker = &s["trackers"][slot];
             let name = tracker["tracker"].as_str().unwrap();
@@ -134,6 +146,7 @@ fn observed_target_corners_stay_within_1_5_px_of_the_truth_in_both_views() {
         }
     }
     let acquired_at = acquired.values().max().copied().unwrap();
-    assert!(judged as u64 >= 2 * (SIM_FRAMES - acquired_at - 1) - 2 * (SIM_FRAMES - recorded.len() as u64), "{judged} judged");
+    let after = ids.iter().filter(|&&id| id >= acquired_at).count();
+    assert!(judged >= 2 * after, "both views judged on every frame from acquisition on: {judged} < 2 x {after}");
     eprintln!("{judged} corner sets judged from frame {acquired_at}; worst corner error left {:.2} px, right {:.2} px", worst[0], worst[1]);
 }
