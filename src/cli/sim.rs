@@ -91,8 +91,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "FILE")]
     verdict_out: Option<PathBuf>,
     /// Ground truth for tests: the --hint-out facet's true corners in both views, one JSON
-    /// line per published frame (frame_id, sim_time_ns, block, face, left_px, right_px).
-    /// The daemon never reads it. Real time only (in lockstep it would answer the frames).
+    /// line per published frame (frame_id, sim_time_ns, block, face, left_px, right_px,
+    /// occluded_px: per view, pixels inside the facet that something hides; from a face-id
+    /// render of its own). The daemon never reads it. Real time only (in lockstep it would
+    /// answer the frames).
     #[arg(long, value_name = "FILE", requires = "hint_out", conflicts_with = "lockstep")]
     truth_out: Option<PathBuf>,
     #[command(flatten)]
