@@ -3,9 +3,10 @@
 //! and thresholds. Every table rejects unknown keys; every key has a default (the values
 //! that fit the simulator's arm), so a file needs only what differs.
 //!
-//! Units are in the names. Time-outs count **frames** at the nominal `frame_rate_hz`, so a
-//! lockstep run (faster than real time) gets the same simulated time as a real-time one;
-//! the stale-stream guard is the only wall-clock limit.
+//! Units are in the names. Time-outs are **camera time**, read from the frames' capture
+//! stamps (`camera_clock.rs`): the simulator stamps simulated time, so a lockstep run (faster
+//! than real time) gets the same time-outs as a real-time one; the stale-stream guard and
+//! the start-up wait are the only wall-clock limits.
 //!
 //! ```
 //! use handeye_daemon::config::DaemonConfig;
@@ -52,7 +53,9 @@ pub struct DaemonConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct RunTiming {
-    /// Nominal camera frame rate: time-outs and tracker time steps count frames at this rate.
+    /// Nominal camera frame rate, used only until the capture stamps have measured the
+    /// camera's own period, and as the step for a frame whose stamp cannot be believed
+    /// (`daemon/src/camera_clock.rs`). Time-outs and the tracker's time step are camera time.
     pub frame_rate_hz: f64,
     /// A cycle (frame received → command sent) longer than this is a deadline miss, µs.
     pub deadline_us: u64,
@@ -60,7 +63,7 @@ pub struct RunTiming {
     pub stale_frame_ms: u64,
     /// Longest wait for the first frame at start-up, s (wall clock).
     pub start_timeout_s: f64,
-    /// After `done`, keep answering frames (holding) for this long before exiting, s of frames;
+    /// After `done`, keep answering frames (holding) for this long before exiting, s of camera time;
     /// the run also ends when the camera stream goes away.
     pub done_hold_s: f64,
     /// Lockstep only: when a worker result (gripper location, calibration fit, plan) is due
@@ -506,8 +509,9 @@ pub struct SafetyConfig {
     pub workspace_max_m: [f64; 3],
     /// Largest believable tool jump between two consecutive state readings, m.
     pub max_state_jump_m: f64,
-    /// Stop when no robot state arrives for this many frames.
-    pub state_stale_frames: u32,
+    /// Stop when no robot state arrives for this long, ms of camera time (the frames'
+    /// capture stamps). Replaces `state_stale_frames` (6 frames at 30 Hz = 200 ms).
+    pub state_stale_ms: u64,
     /// In phases that need a tracker, a confidence score below this counts as lost.
     pub min_tracker_score: f64,
     /// The same for the target trackers. Lower: a block face 25-30 mm across is ~30 px,
@@ -523,7 +527,7 @@ impl Default for SafetyConfig {
             workspace_min_m: [-0.8, -0.8, -0.01],
             workspace_max_m: [0.8, 0.8, 0.8],
             max_state_jump_m: 0.05,
-            state_stale_frames: 6,
+            state_stale_ms: 200,
             min_tracker_score: 0.6,
             min_target_score: 0.45,
         }
@@ -623,6 +627,9 @@ impl DaemonConfig {
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
         let parse_error = |message: String| ConfigError::Parse { file: file.to_path_buf(), message };
         let table: toml::Table = toml::from_str(text).map_err(|e| parse_error(e.to_string()))?;
+        if let Some((old, new)) = renamed_key(&table) {
+            return Err(parse_error(format!("{old} is no longer read: set {new} instead")));
+        }
         if let Some(key) = unknown_key(&table, &Self::known_keys(), "") {
             return Err(parse_error(format!("unknown key {key}")));
         }
@@ -776,11 +783,16 @@ impl DaemonConfig {
         }
         Ok(())
     }
+}
 
-    /// Seconds → frames at the nominal rate (at least 1).
-    pub fn frames(&self, seconds: f64) -> u64 {
-        (seconds * self.timing.frame_rate_hz).ceil().max(1.0) as u64
-    }
+/// Keys that counted frames at `frame_rate_hz` and now are camera time: (old, new).
+const RENAMED: [(&str, &str, &str); 1] = [("safety", "state_stale_frames", "safety.state_stale_ms (milliseconds of camera time)")];
+
+/// The first renamed key a file still sets, with what replaces it.
+fn renamed_key(table: &toml::Table) -> Option<(String, &'static str)> {
+    RENAMED.iter().find_map(|&(group, key, new)| {
+        table.get(group).and_then(toml::Value::as_table).filter(|t| t.contains_key(key)).map(|_| (format!("{group}.{key}"), new))
+    })
 }
 
 /// The first key of `table` (a file's) that `known` lacks, as a dotted path (`servo.gian`).
@@ -938,7 +950,7 @@ mod tests {
             "safety.workspace_min_m",
             "safety.workspace_max_m",
             "safety.max_state_jump_m",
-            "safety.state_stale_frames",
+            "safety.state_stale_ms",
             "safety.min_tracker_score",
             "safety.min_target_score",
             "tracker.points",
@@ -1002,6 +1014,9 @@ mod tests {
             let err = DaemonConfig::parse(text, Path::new("my.toml")).unwrap_err().to_string();
             assert!(err.contains("my.toml") && err.contains(&format!("{key}: ")), "{text:?}: {err}");
         }
+        // A key that counted frames names the key that replaced it.
+        let err = DaemonConfig::parse("[safety]\nstate_stale_frames = 6\n", Path::new("my.toml")).unwrap_err().to_string();
+        assert!(err.contains("my.toml") && err.contains("safety.state_stale_frames") && err.contains("safety.state_stale_ms"), "{err}");
         // A key that is a table's name used as a value is a type error, not an unknown key.
         assert!(DaemonConfig::parse("servo = 1\n", Path::new("my.toml")).is_err());
     }

@@ -18,12 +18,13 @@ use handeye_wire::{
     monotonic_ns, robot_flags, Phase, RobotCommand, RobotState, Telemetry, NO_FRAME, TELEMETRY_CORNERS, WIRE_VERSION,
 };
 
+use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
 use crate::config::DaemonConfig;
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
 use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
-use crate::phase::step::{Cmd, Cycle, Step};
+use crate::phase::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::phase::PhaseState;
 use crate::recovery::{Recovery, RecoveryStep};
 use crate::safety::{check_robot, check_trackers};
@@ -59,9 +60,13 @@ pub struct HardLoop {
     tracker_timing: LatencyHistogram,
     seq: u64,
     frames: u64,
-    last_frame_id: Option<u64>,
+    /// The daemon's time, from the frames' capture stamps.
+    clock: CameraClock,
     robot: Option<RobotState>,
-    robot_frame: u64,
+    /// A robot state arrived since the last cycle.
+    robot_fresh: bool,
+    /// Camera time of the cycle that last had a fresh robot state, ns.
+    robot_seen_ns: u64,
     robot_states: u64,
     rejected_seq: Option<u64>,
     /// Furthest working phase entered.
@@ -78,6 +83,7 @@ pub struct HardLoop {
 impl HardLoop {
     pub fn new(cfg: DaemonConfig, hint: Option<OperatorHint>) -> std::io::Result<Self> {
         let deadline_ns = cfg.timing.deadline_us * 1000;
+        let clock = CameraClock::new(cfg.timing.frame_rate_hz);
         Ok(Self {
             mission: Mission::new(cfg, hint.as_ref())?,
             phase: PhaseState::AcquireGripper(AcquireGripper::new(0)),
@@ -85,9 +91,10 @@ impl HardLoop {
             tracker_timing: LatencyHistogram::new(u64::MAX),
             seq: 0,
             frames: 0,
-            last_frame_id: None,
+            clock,
             robot: None,
-            robot_frame: 0,
+            robot_fresh: false,
+            robot_seen_ns: 0,
             robot_states: 0,
             rejected_seq: None,
             phase_reached: Phase::AcquireGripper,
@@ -118,7 +125,7 @@ impl HardLoop {
         }
         self.mission.calibration.note_start_pose(s.tool_pos_m.map(f64::from), f64::from(s.tool_yaw_rad));
         self.robot = Some(*s);
-        self.robot_frame = self.frames;
+        self.robot_fresh = true;
         self.robot_states += 1;
     }
 
@@ -131,18 +138,22 @@ impl HardLoop {
         self.mission.reporting.snapshot(if phase == Phase::Failed { "failed" } else { "stopped" });
     }
 
-    /// Processes one stereo frame and returns what it produced: the command answering it and
-    /// the report requests. Call [`Self::finish_cycle`] with the cycle's duration before
-    /// publishing the telemetry.
-    pub fn cycle(&mut self, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> CycleOutput {
+    /// Processes one stereo frame (its id and `capture_time_ns` from the stereo header) and
+    /// returns what it produced: the command answering it and the report requests. Call
+    /// [`Self::finish_cycle`] with the cycle's duration before publishing the telemetry.
+    pub fn cycle(&mut self, frame_id: u64, capture_time_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> CycleOutput {
         let frame_index = self.frames;
         self.frames += 1;
-        let gap = self.last_frame_id.map_or(1, |last| frame_id.saturating_sub(last).max(1));
-        self.last_frame_id = Some(frame_id);
-        let dt_s = gap as f64 / self.mission.cfg.timing.frame_rate_hz;
-        let (states, update_ns) = self.mission.trackers.update_timed(left, right, dt_s, monotonic_ns);
+        let tick = self.clock.tick(frame_id, capture_time_ns);
+        if tick.bad_stamp {
+            tracing::warn!(frame_id, capture_time_ns, "capture stamp not believed: one frame period assumed");
+        }
+        if std::mem::take(&mut self.robot_fresh) {
+            self.robot_seen_ns = tick.now_ns;
+        }
+        let (states, update_ns) = self.mission.trackers.update_timed(left, right, tick.dt_s, monotonic_ns);
         self.telemetry.tracker_update_ns = update_ns;
-        let cmd = self.decide(frame_index, frame_id, left, right, states);
+        let cmd = self.decide(frame_index, frame_id, tick, left, right, states);
         let phase = self.phase.phase();
         if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
             self.phase_reached = phase;
@@ -164,18 +175,19 @@ impl HardLoop {
         CycleOutput { command, reports: self.mission.reporting.take_requests() }
     }
 
-    fn decide(&mut self, frame_index: u64, frame_id: u64, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
+    fn decide(&mut self, frame_index: u64, frame_id: u64, tick: FrameTick, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
         if self.phase.is_terminal() {
             return Cmd::HOLD;
         }
+        let stale_s = self.mission.cfg.safety.state_stale_ms as f64 * 1e-3;
         let Some(robot) = self.robot else {
-            if frame_index >= u64::from(self.mission.cfg.safety.state_stale_frames) {
+            if elapsed_at_least(0, tick.now_ns, stale_s) {
                 self.stop_reason(Phase::Stopped, Fault::new(FailureKind::RobotState, "no robot state received"));
             }
             return Cmd::HOLD;
         };
-        if frame_index.saturating_sub(self.robot_frame) > u64::from(self.mission.cfg.safety.state_stale_frames) {
-            let detail = format!("no robot state for {} frames", frame_index - self.robot_frame);
+        if timed_out(self.robot_seen_ns, tick.now_ns, stale_s) {
+            let detail = format!("no robot state for {:.0} ms of camera time", (tick.now_ns - self.robot_seen_ns) as f64 * 1e-6);
             self.stop_reason(Phase::Stopped, Fault::new(FailureKind::RobotState, detail));
             return Cmd::STOP;
         }
@@ -221,7 +233,7 @@ impl HardLoop {
             self.stop_reason(Phase::Stopped, fault);
             return Cmd::STOP;
         }
-        let cycle = Cycle { frame_index, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
+        let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         match self.phase.step(&mut self.mission, &cycle) {
             Step::Stay(c) | Step::Next(c) => c,
             Step::Fail(fault) => {
@@ -290,6 +302,7 @@ impl HardLoop {
             *dst = if in_servo && src.is_finite() { src as f32 } else { f32::NAN };
         }
         t.servo_steps = self.mission.servo.steps();
+        t.dropped_frames = self.clock.dropped_frames();
         t.planning = u32::from(self.mission.worker.busy());
         match &self.failure {
             Some(failure) => t.set_reason(&failure.detail),
@@ -328,7 +341,7 @@ impl HardLoop {
     pub fn finished(&self) -> bool {
         match self.phase {
             PhaseState::Failed | PhaseState::Stopped => true,
-            PhaseState::Done { since_frame } => self.frames.saturating_sub(since_frame) > self.mission.cfg.frames(self.mission.cfg.timing.done_hold_s),
+            PhaseState::Done { since_ns } => timed_out(since_ns, self.clock.now_ns(), self.mission.cfg.timing.done_hold_s),
             _ => false,
         }
     }
@@ -381,6 +394,7 @@ impl HardLoop {
                     us_mean: tt.mean_ns() / 1000.0,
                     cycles: tt.count(),
                 },
+                camera: self.clock(),
             },
             task: TaskRecord {
                 calibration: m.calibration.stats(),
@@ -425,7 +439,61 @@ impl HardLoop {
         self.stopped_at_frame
     }
 
+    /// The camera clock's counts: frames, dropped frames, bad stamps, rates, time steps.
+    pub fn clock(&self) -> ClockStats {
+        self.clock.stats()
+    }
+
     pub fn robot_states(&self) -> u64 {
         self.robot_states
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+
+    /// Runs frames `(id, capture_time_ns)` with no robot state; the index of the frame at
+    /// which the run stopped, if it did.
+    fn stop_frame(frames: &[(u64, u64)]) -> (Option<usize>, HardLoop) {
+        let mut hl = HardLoop::new(DaemonConfig::default(), None).unwrap();
+        let img = ImageBuf::filled(64, 48, 100);
+        for (i, &(id, t)) in frames.iter().enumerate() {
+            hl.cycle(id, t, &img.view(), &img.view());
+            if hl.phase() == Phase::Stopped {
+                assert_eq!(hl.failure().map(|f| f.detail.as_str()), Some("no robot state received"));
+                return (Some(i), hl);
+            }
+        }
+        (None, hl)
+    }
+
+    #[test]
+    fn time_outs_run_on_the_capture_stamps_not_on_frame_counts() {
+        // safety.state_stale_ms = 200: a 30 Hz camera reaches it at its 7th frame (200 ms)...
+        let t0 = 5_000_000_000;
+        let at_30hz: Vec<(u64, u64)> = (0..10).map(|i| (i, t0 + i * 33_333_333)).collect();
+        assert_eq!(stop_frame(&at_30hz).0, Some(6));
+        // ... a 10 Hz camera at its 3rd, whatever frame_rate_hz says.
+        let at_10hz: Vec<(u64, u64)> = (0..10).map(|i| (i, t0 + i * 100_000_000)).collect();
+        assert_eq!(stop_frame(&at_10hz).0, Some(2));
+        // Every other frame dropped at 30 Hz: the ids skip, the time is the stamps' (frame
+        // id 6 at 200 ms is the 4th frame received), and the drops are counted.
+        let gapped: Vec<(u64, u64)> = (0..10).map(|i| (2 * i, t0 + 2 * i * 33_333_333)).collect();
+        let (stopped, hl) = stop_frame(&gapped);
+        assert_eq!(stopped, Some(3));
+        let c = hl.clock();
+        assert_eq!((c.frames, c.dropped_frames), (4, 3));
+        assert!((c.dt_ms_max - 66.7).abs() < 0.1, "{c:?}");
+        // Stamps that go back are not believed: the clock goes on by the measured period,
+        // so the time-out still comes (at 30 Hz frames: the 7th).
+        let mut stuck = at_30hz.clone();
+        for f in stuck.iter_mut().skip(3) {
+            f.1 = t0;
+        }
+        let (stopped, hl) = stop_frame(&stuck);
+        assert_eq!(stopped, Some(6));
+        assert_eq!(hl.clock().bad_stamps, 4);
     }
 }

@@ -9,11 +9,13 @@
 //! [`worker`] thread; report images are encoded on another ([`report`]). [`service`] runs it
 //! all against the `handeye/*` services of a domain, whoever publishes them.
 
+pub mod camera_clock;
 pub mod config;
 pub mod fault;
 pub mod gripper;
 pub mod hard_loop;
 pub mod mission;
+pub mod observe;
 pub mod outcome;
 pub mod phase;
 pub mod planning;
@@ -21,8 +23,10 @@ pub mod recovery;
 pub mod report;
 pub mod safety;
 pub mod service;
+pub mod stereo_model;
 pub mod servo_plot;
 pub mod timing;
+pub mod track_search;
 pub mod worker;
 
 pub use config::DaemonConfig;

@@ -54,6 +54,9 @@ pub struct LoopTiming {
     pub robot_states: u64,
     /// The trackers' own update time: `"tracker_update": {...}` in `daemon.json`.
     pub tracker_update: TrackerTiming,
+    /// The camera clock (`"camera": {...}`): frames, dropped frames (gaps in the ids), bad
+    /// stamps, the camera's rate and the filter's time step, all from the capture stamps.
+    pub camera: crate::camera_clock::ClockStats,
 }
 
 /// The stereo tracker update of a cycle (every active contour, both views, summed) over the
@@ -115,6 +118,7 @@ mod tests {
                 cycles: 900,
                 robot_states: 1800,
                 tracker_update: TrackerTiming { us_p50: 60.0, us_p99: 85.0, us_max: 140.0, us_mean: 62.0, cycles: 880 },
+                camera: crate::camera_clock::ClockStats::default(),
             },
             task: TaskRecord {
                 calibration: None,
@@ -138,7 +142,7 @@ mod tests {
         let keys: Vec<&str> = value.as_object().unwrap().keys().map(String::as_str).collect();
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
-            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "calibration",
+            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "camera", "calibration",
             "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
             "servo_trace", "wall_s",
         ];

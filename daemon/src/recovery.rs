@@ -1,18 +1,21 @@
 //! Re-acquiring the trackers of one view after its camera moved (a knock): both the plate
 //! and the target are lost in that view at once while the other view still tracks both. The
 //! arm is stopped; the plate tracker (the highest-contrast contour) is searched for over a
-//! grid of image translations of its last good frame (a few hundred candidates, spread over
-//! frames, `CANDIDATES_PER_FRAME` per cycle); the best one restarts it, the target tracker
-//! restarts at its last good frame moved by the same translation (a knocked camera shifts
-//! the whole view), and both must track confidently for a while before the servo resumes
-//! with fresh measurements. The coplanarity servo compares gripper and target in the same
-//! images, so the stale calibration of the moved camera only makes its Jacobian less exact.
+//! grid of image translations of its last good frame ([`crate::track_search`]: a few
+//! hundred candidates, spread over frames, `CANDIDATES_PER_FRAME` per cycle); the best one
+//! restarts it, the target tracker restarts at its last good frame moved by the same
+//! translation (a knocked camera shifts the whole view), and both must track confidently
+//! for a while before the servo resumes with fresh measurements. The coplanarity servo
+//! compares gripper and target in the same images, so the stale calibration of the moved
+//! camera only makes its Jacobian less exact.
 //!
 //! Allocates (tracker clones per candidate): it runs only while the arm is stopped.
 
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{TemplateFrame, ContourTracker, Role, StereoTrackerSet, View};
+use handeye_vision::tracker::{Role, StereoTrackerSet, TemplateFrame, View};
 use nalgebra::Vector2;
+
+use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
 
 /// Largest view shift searched for, px (a 3° pan at f = 1800 px is ~94 px).
 pub const MAX_SHIFT_PX: f64 = 160.0;
@@ -29,11 +32,10 @@ pub const CONFIRM_FRAMES: u32 = 12;
 pub struct Recovery {
     pub view: View,
     pub start_frame: u64,
-    gripper_frame: TemplateFrame,
     target_frame: TemplateFrame,
-    candidates: Vec<Vector2<f64>>,
-    next: usize,
-    best: Option<(f64, Vector2<f64>)>,
+    search: ShiftSearch,
+    /// The plate's shift, once found.
+    found: Option<Vector2<f64>>,
     confirmed: Option<u32>,
 }
 
@@ -64,16 +66,14 @@ impl Recovery {
     pub fn start(trackers: &StereoTrackerSet, view: View, frame_index: u64) -> Option<Self> {
         let g = trackers.get(Role::Gripper, view)?.frame();
         let t = trackers.get(Role::Target, view)?.frame();
-        // Nearest shifts first: a small knock is found quickly.
-        let n = (MAX_SHIFT_PX / STEP_PX) as i32;
-        let mut candidates: Vec<Vector2<f64>> =
-            (-n..=n).flat_map(|i| (-n..=n).map(move |j| Vector2::new(f64::from(i) * STEP_PX, f64::from(j) * STEP_PX))).collect();
-        candidates.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
-        Some(Self { view, start_frame: frame_index, gripper_frame: g, target_frame: t, candidates, next: 0, best: None, confirmed: None })
-    }
-
-    fn shifted(f: &TemplateFrame, d: Vector2<f64>) -> TemplateFrame {
-        TemplateFrame::new(f.origin + d, f.e1, f.e2)
+        let settings = SearchSettings {
+            max_shift_px: MAX_SHIFT_PX,
+            step_px: STEP_PX,
+            candidates_per_frame: CANDIDATES_PER_FRAME,
+            ..SearchSettings::default()
+        };
+        let search = ShiftSearch::new(settings, g, Vector2::zeros());
+        Some(Self { view, start_frame: frame_index, target_frame: t, search, found: None, confirmed: None })
     }
 
     /// One cycle on `image` (the moved view).
@@ -98,51 +98,29 @@ impl Recovery {
                 let _ = t.reinit(&corners);
             }
             if *frames >= CONFIRM_FRAMES {
-                let d = self.best.map(|b| b.1).unwrap_or_default();
+                let d = self.found.unwrap_or_default();
                 return RecoveryStep::Recovered { shift_px: [d.x, d.y] };
             }
             return RecoveryStep::Searching;
         }
-        let Some(base) = trackers.get(Role::Gripper, self.view).cloned() else {
+        let Some(base) = trackers.get(Role::Gripper, self.view) else {
             return RecoveryStep::Failed(RecoveryError::NoGripperTracker);
         };
-        let end = (self.next + CANDIDATES_PER_FRAME).min(self.candidates.len());
-        for &d in &self.candidates[self.next..end] {
-            let mut t: ContourTracker = base.clone();
-            if t.reinit_at(Self::shifted(&self.gripper_frame, d)).is_err() {
-                continue;
-            }
-            if !t.update(image, 0.0).is_tracking() || !t.update(image, 0.0).is_tracking() {
-                continue;
-            }
-            // Same size as before the knock: the plate's dark border has an outer edge too, and
-            // a contour grown onto it tracks just as confidently.
-            let ratio = t.frame().det() / self.gripper_frame.det();
-            if !(0.9..=1.11).contains(&ratio) {
-                continue;
-            }
-            let score = t.confidence().score;
-            if self.best.is_none_or(|b| score > b.0) {
-                // The shift the tracker converged to, finer than the grid.
-                self.best = Some((score, t.frame().origin - self.gripper_frame.origin));
-            }
-        }
-        self.next = end;
-        if self.next < self.candidates.len() && self.best.is_none_or(|b| b.0 < 0.95) {
-            return RecoveryStep::Searching;
-        }
-        match self.best {
-            Some((score, d)) if score >= MIN_SCORE => {
-                for (role, frame) in [(Role::Gripper, self.gripper_frame), (Role::Target, self.target_frame)] {
+        match self.search.step(base, image) {
+            SearchStep::Searching => RecoveryStep::Searching,
+            SearchStep::Done(Some(best)) if best.score >= MIN_SCORE => {
+                let d = best.shift_px;
+                for (role, frame) in [(Role::Gripper, self.search.frame()), (Role::Target, self.target_frame)] {
                     if let Some(t) = trackers.get_mut(role, self.view) {
-                        let _ = t.reinit_at(Self::shifted(&frame, d));
+                        let _ = t.reinit_at(ShiftSearch::shifted(&frame, d));
                         trackers.set_active(role, self.view, true);
                     }
                 }
+                self.found = Some(d);
                 self.confirmed = Some(0);
                 RecoveryStep::Searching
             }
-            _ => RecoveryStep::Failed(RecoveryError::NotFound { best_score: self.best.map_or(0.0, |b| b.0) }),
+            SearchStep::Done(best) => RecoveryStep::Failed(RecoveryError::NotFound { best_score: best.map_or(0.0, |b| b.score) }),
         }
     }
 }
@@ -151,7 +129,7 @@ impl Recovery {
 mod tests {
     use super::*;
     use handeye_vision::image::ImageBuf;
-    use handeye_vision::tracker::TrackerConfig;
+    use handeye_vision::tracker::{ContourTracker, TrackerConfig};
 
     /// A bright plate in a dark border (the gripper) and a grey square (the target), shifted
     /// by `(dx, dy)`.

@@ -44,6 +44,8 @@ pub enum ServiceError {
     Thread(#[from] std::io::Error),
     #[error("no stereo frame arrived within {0:.0} s of start-up")]
     NoFrames(f64),
+    #[error("{0}")]
+    Setup(String),
 }
 
 /// Options of one daemon run.
@@ -114,7 +116,7 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                         MessageEvent::Interrupted => break,
                     }
                 }
-                let out = hl.cycle(frame.frame_id(), &left, &right);
+                let out = hl.cycle(frame.frame_id(), frame.header().capture_time_ns, &left, &right);
                 let loop_ns = monotonic_ns().saturating_sub(receive_ns);
                 let t = *hl.finish_cycle(loop_ns);
                 send(&mut commands, &mut telemetry, &out.command, &t)?;
@@ -164,12 +166,24 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     let outcome = hl.outcome(start.elapsed().as_secs_f64());
     let (report_files, report_errors) = match report {
         Some(mut rep) => {
+            // The fitted camera model, for `handeye daemon --observe --stereo-model`.
+            let mut model_file = Vec::new();
+            if let Some(cal) = hl.mission().calibration.get() {
+                let path = rep.dir().join("stereo_model.json");
+                let text = serde_json::to_string_pretty(&crate::stereo_model::StereoModelFile::from_model(&cal.model)).unwrap_or_default();
+                match std::fs::write(&path, text) {
+                    Ok(()) => model_file.push(path),
+                    Err(e) => tracing::warn!(path = %path.display(), error = %e, "stereo model not written"),
+                }
+            }
             rep.submit(ReportJob::ServoPlot {
                 rows: outcome.servo_trace.clone(),
                 tolerance_mm: hl.config().servo.convergence.converged_m * 1e3,
                 tolerance_deg: hl.config().servo.convergence.converged_deg,
             });
-            rep.finish()
+            let (mut files, errors) = rep.finish();
+            files.extend(model_file);
+            (files, errors)
         }
         None => (Vec::new(), Vec::new()),
     };

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use handeye_wire::message::{MessageEvent, MessagePublisher, MessageSubscriber};
 use handeye_wire::stereo::{Delivery, StereoFormat, StereoPublisher, StereoPublisherOptions};
-use handeye_wire::{Domain, RobotCommand, RobotState, Telemetry, WireNode, monotonic_ns};
+use handeye_wire::{Domain, RobotCommand, RobotState, Telemetry, WireNode};
 
 use crate::render::RenderError;
 use crate::run::{FrameMeta, RunError, Transport};
@@ -135,11 +135,13 @@ impl WireTransport {
 }
 
 impl Transport for WireTransport {
-    fn publish_frame(&mut self, _meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<u64, RunError> {
+    fn publish_frame(&mut self, meta: &FrameMeta, fill: &mut dyn FnMut(&mut [u8]) -> Result<(), RenderError>) -> Result<u64, RunError> {
         let mut rendered = Ok(());
         let frame_id = self
             .frames
-            .publish(monotonic_ns(), |payload| {
+            // Stamped with simulated time: the daemon's clock is the frames' capture time, so
+            // a lockstep run keeps its simulated timing whatever the machine's speed.
+            .publish(meta.sim_time_ns, |payload| {
                 // The geometry is tightly packed (stride = width): the renderer's layout.
                 debug_assert_eq!(payload.len(), (self.geometry.width * self.geometry.height * 2) as usize);
                 rendered = fill(payload);

@@ -35,6 +35,8 @@ Examples:
   handeye feed --mono --dir ../shared/data/visp-cube --count 200 --rate-hz 0
   # a stereo pair sequence: DIR/left/*.png and DIR/right/*.png with matching names
   handeye feed --dir pairs/run3 --rate-hz 15
+  # a camera that loses every third frame (ids 0 1 _ 3 4 _ 6 ...), at 30 frames/s
+  handeye feed --mono --dir ../shared/data/visp-cube --drop-every 3
   # replay a recording at its recorded timing, then losslessly as fast as possible
   handeye feed --dir recordings/run3
   handeye feed --dir recordings/run3 --rate-hz 0";
@@ -77,6 +79,12 @@ pub struct FeedArgs {
     /// After the last file start again at the first (frame ids keep counting up).
     #[arg(long = "loop")]
     pub looping: bool,
+
+    /// Drop every Nth frame, like a camera that loses frames: it is not sent, but its frame
+    /// id and its time slot pass (the next frame's id skips it, and its capture stamp is
+    /// when it is sent). 0 = drop none. --count counts frames sent.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub drop_every: u64,
 
     /// Seconds to wait for a subscriber before the first frame (and, at --rate-hz 0, whenever
     /// none is left, or one stops taking frames) before giving up with an error. 0 = start at
@@ -212,6 +220,9 @@ pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayIm
 }
 
 pub fn run(args: FeedArgs) -> Result<()> {
+    if args.drop_every == 1 {
+        bail!("--drop-every 1 would drop every frame (use 2 or more, or 0 for none)");
+    }
     let seq = load_sequence(&args.dir, args.mono)?;
     let clock = seq.recorded.clone().map(ReplayClock::new);
     let rate = match (args.rate_hz, &clock) {
@@ -261,6 +272,9 @@ pub fn run(args: FeedArgs) -> Result<()> {
     let mut next_progress = start + Duration::from_secs(1);
     let mut next_subscriber_check = start;
     let mut sent = 0u64;
+    let mut dropped = 0u64;
+    // Frames taken from the sequence (sent or dropped): a PNG folder's frame id.
+    let mut taken = 0u64;
     let mut index = 0usize;
     let mut pass = 0u64;
     // CLOCK_MONOTONIC ns of the replay's first frame: recorded offsets count from it.
@@ -283,6 +297,15 @@ pub fn run(args: FeedArgs) -> Result<()> {
         let (left_path, right_path) = &seq.frames[index];
         let stamp = clock.as_ref().map(|c| c.stamp(index, pass));
         index += 1;
+        taken += 1;
+        if args.drop_every > 0 && taken.is_multiple_of(args.drop_every) {
+            // Lost like a camera's frame: its slot passes (paced rates), its id is skipped.
+            dropped += 1;
+            if let Some(period) = period {
+                next_send = (next_send + period).max(Instant::now());
+            }
+            continue;
+        }
         let left = decode_gray(left_path, seq.width, seq.height)?;
         let right = match right_path {
             Some(p) => Some(decode_gray(p, seq.width, seq.height)?),
@@ -325,7 +348,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
                 let t0 = *replay_start_ns.get_or_insert_with(monotonic_ns);
                 publisher.publish_with_id(id, t0 + offset_ns, fill)
             }
-            None => publisher.publish(monotonic_ns(), fill),
+            None => publisher.publish_with_id(taken - 1, monotonic_ns(), fill),
         };
         match result {
             Ok(_) => sent += 1,
@@ -353,9 +376,10 @@ pub fn run(args: FeedArgs) -> Result<()> {
     finish(&mut publisher, &node, camera_period, interrupted)?;
     let secs = start.elapsed().as_secs_f64().max(1e-9);
     eprintln!(
-        "feed: {} after {sent} frames in {secs:.2} s ({:.1} frames/s)",
+        "feed: {} after {sent} frames in {secs:.2} s ({:.1} frames/s){}",
         if interrupted { "stopped" } else { "done" },
-        sent as f64 / secs
+        sent as f64 / secs,
+        if dropped > 0 { format!(", {dropped} dropped (--drop-every {})", args.drop_every) } else { String::new() }
     );
     Ok(())
 }

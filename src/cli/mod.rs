@@ -14,6 +14,7 @@ pub mod recording;
 pub mod report;
 pub mod run;
 pub mod sim;
+pub mod sim_truth;
 pub mod snapshot;
 pub mod stats;
 pub mod telemetry;

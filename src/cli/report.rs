@@ -393,7 +393,7 @@ pub(crate) mod tests {
         let text = include_str!("testdata/daemon_outcome.json");
         serde_json::from_str::<DaemonOutcome>(text).unwrap();
         // Fields `handeye run` reads; the daemon's type requires each of them.
-        for field in ["phase_reached", "servo_steps", "loop_us_p50", "deadline_misses"] {
+        for field in ["phase_reached", "servo_steps", "loop_us_p50", "deadline_misses", "dropped_frames"] {
             renamed_field_fails::<DaemonOutcome>(text, field);
         }
     }

@@ -105,6 +105,13 @@ pub struct SimArgs {
     /// that command processed.
     #[arg(long, value_enum, default_value_t = RobotArg::Sim, conflicts_with = "scripted_pick")]
     robot: RobotArg,
+    /// Ground truth for tests: the --hint-out facet's true corners in both views, one JSON
+    /// line per published frame (frame_id, sim_time_ns, block, face, left_px, right_px,
+    /// occluded_px: per view, pixels inside the facet that something hides; from a face-id
+    /// render of its own). The daemon never reads it. Real time only (in lockstep it would
+    /// answer the frames).
+    #[arg(long, value_name = "FILE", requires = "hint_out", conflicts_with = "lockstep")]
+    truth_out: Option<PathBuf>,
     #[command(flatten)]
     domain: DomainArgs,
 }
@@ -180,6 +187,7 @@ pub fn run(args: SimArgs) -> Result<()> {
         reply_timeout: Duration::from_secs_f64(args.reply_timeout_s),
         stop_on_success: !args.no_stop_on_success,
     };
+    let mut truth_facet = None;
     if let Some(path) = &args.hint_out {
         match handeye_sim::referee::hint::operator_hint(&runner.sim, runner.sim.scenario.seed) {
             Ok((hint, facet)) => {
@@ -189,6 +197,7 @@ pub fn run(args: SimArgs) -> Result<()> {
                 std::fs::write(&tmp, text).with_context(|| format!("writing the hint to {}", tmp.display()))?;
                 std::fs::rename(&tmp, path).with_context(|| format!("writing the hint to {}", path.display()))?;
                 runner.watch.set_facet(facet);
+                truth_facet = Some((facet.block, facet.face));
                 if runner.sim.scenario.events.iter().any(|e| matches!(e, handeye_sim::scenario::Event::Occluder { .. })) {
                     let px = runner.face_visible_px(facet.block, facet.face)?;
                     runner.watch.set_facet_baseline(px);
@@ -222,7 +231,18 @@ pub fn run(args: SimArgs) -> Result<()> {
         let hold_s = runner.sim.scenario.success.hold_s + 1.0;
         GroundTruthPick::new(&runner.sim, target, 0.07, hold_s)
     });
-    let driver = script.as_mut().map(|s| s as &mut dyn Driver);
+    let mut truth = match (&args.truth_out, truth_facet) {
+        (Some(path), Some((block, face))) => {
+            let inner = script.take().map(|s| Box::new(s) as Box<dyn Driver>);
+            Some(super::sim_truth::TruthWriter::create(path, block, face, inner)?)
+        }
+        (Some(path), None) => anyhow::bail!("--truth-out {}: the target has no hinted facet to write the truth of", path.display()),
+        (None, _) => None,
+    };
+    let driver = match truth.as_mut() {
+        Some(t) => Some(t as &mut dyn Driver),
+        None => script.as_mut().map(|s| s as &mut dyn Driver),
+    };
     let stats = if args.lockstep {
         run_lockstep(&mut runner, &mut transport, &options, driver)?
     } else {
@@ -230,6 +250,9 @@ pub fn run(args: SimArgs) -> Result<()> {
     };
     if let Some(f) = &runner.sim.follower {
         eprintln!("sim: followed {} robot driver states; {} poses beyond the simulated arm", f.states, f.unreachable);
+    }
+    if let (Some(t), Some(path)) = (truth.take(), &args.truth_out) {
+        t.finish(path)?;
     }
     let verdict = runner.sim.verdict();
     let verdict_text = match verdict {

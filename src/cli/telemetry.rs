@@ -75,6 +75,7 @@ pub fn telemetry_json(t: &Telemetry) -> Value {
         "planning": t.planning == 1,
         "loop_ns": t.loop_ns,
         "deadline_misses": t.deadline_misses,
+        "dropped_frames": t.dropped_frames,
         "trackers": trackers,
         "servo_error": t.servo_error.iter().map(|&v| finite_or_null(v)).collect::<Vec<_>>(),
         "servo_steps": t.servo_steps,

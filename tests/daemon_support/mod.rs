@@ -59,10 +59,12 @@ impl InProcess {
         let left = ImageView::new(l, w, h, w).unwrap();
         let right = ImageView::new(r, w, h, w).unwrap();
         let frame = self.frame;
+        // Stamped as the simulator's transport stamps its frames: simulated time.
+        let capture_time_ns = self.runner.sim.now_ns();
         let daemon = &mut self.daemon;
         let mut cmd = RobotCommand::default();
         inside(&mut || {
-            cmd = daemon.cycle(frame, &left, &right).command;
+            cmd = daemon.cycle(frame, capture_time_ns, &left, &right).command;
             daemon.finish_cycle(1);
         });
         let t = *self.daemon.telemetry();

@@ -505,7 +505,7 @@ mod tests {
         assert_eq!(t.validate().unwrap_err().key(), "range");
         let t = Telemetry { tracker_confidence: [f32::NAN, 0.0, 0.0, 0.0], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "non_finite");
-        let t = Telemetry { phase: 11, ..Telemetry::default() };
+        let t = Telemetry { phase: 12, ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");
         let t = Telemetry { tracker_state: [0, 1, 2, 3], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");

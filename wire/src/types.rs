@@ -10,7 +10,7 @@ use iceoryx2::prelude::*;
 
 /// Version of the wire contract. Bumped on any change to a type in this module; a receiver
 /// rejects samples of any other version.
-pub const WIRE_VERSION: u32 = 2;
+pub const WIRE_VERSION: u32 = 3;
 
 /// Service names (iceoryx2). The same names are used for the matching event services that
 /// wake subscribers (see `wire/README.md`).
@@ -278,6 +278,8 @@ pub enum Phase {
     Done = 8,
     Failed = 9,
     Stopped = 10,
+    /// `handeye daemon --observe`: tracking only, no robot, no commands.
+    Observe = 11,
 }
 
 impl Phase {
@@ -294,6 +296,7 @@ impl Phase {
             8 => Self::Done,
             9 => Self::Failed,
             10 => Self::Stopped,
+            11 => Self::Observe,
             _ => return None,
         })
     }
@@ -311,6 +314,7 @@ impl Phase {
             Self::Done => "done",
             Self::Failed => "failed",
             Self::Stopped => "stopped",
+            Self::Observe => "observe",
         }
     }
 }
@@ -361,6 +365,9 @@ pub struct Telemetry {
     pub planning: u32,
     /// Human-readable status or failure reason, UTF-8, NUL-padded.
     pub reason: [u8; REASON_LEN],
+    /// Frames dropped before reaching the daemon so far: the gaps in the frame ids it saw
+    /// (since version 3).
+    pub dropped_frames: u64,
 }
 
 impl Default for Telemetry {
@@ -381,6 +388,7 @@ impl Default for Telemetry {
             servo_steps: 0,
             planning: 0,
             reason: [0; REASON_LEN],
+            dropped_frames: 0,
         }
     }
 }
@@ -423,7 +431,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<StereoHeader>(), 4 * 2 + 8 * 3 + 4 * 4);
         assert_eq!(std::mem::size_of::<RobotState>(), 4 * 2 + 8 * 4 + 4 * (3 + 1 + 5 + 1 + 2));
         assert_eq!(std::mem::size_of::<RobotCommand>(), 4 * 2 + 8 * 3 + 4 * (3 + 1 + 1 + 1));
-        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96);
+        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96 + 8);
     }
 
     #[test]
@@ -443,10 +451,10 @@ mod tests {
         }
         assert_eq!(CommandKind::from_u32(5), None);
         assert_eq!(PixelFormat::from_u32(0), None);
-        for p in 0..11 {
+        for p in 0..12 {
             assert_eq!(Phase::from_u32(p).map(|x| x as u32), Some(p));
         }
-        assert_eq!(Phase::from_u32(11), None);
+        assert_eq!(Phase::from_u32(12), None);
     }
 
     #[test]

@@ -16,7 +16,7 @@ use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, GripperCommand};
 
 use super::job::PendingJob;
-use super::step::{timed_out, Cmd, Cycle, Step};
+use super::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::gripper::{find_plate, PlateError};
 use crate::mission::Mission;
 
@@ -35,7 +35,7 @@ pub enum LocatePlatesError {
 enum Stage {
     /// Jaws opening (or open), waiting for them and the arm to be still.
     Open { still: u32 },
-    Close { sent_frame: Option<u64>, still: u32 },
+    Close { sent_ns: Option<u64>, still: u32 },
     /// Location running on the worker (once submitted); the jaws reopen meanwhile.
     Locating { job: Option<PendingJob<Result<PlateCorners, LocatePlatesError>>> },
     Converging { frames: u32 },
@@ -54,7 +54,7 @@ impl fmt::Debug for Stage {
         }
         match self {
             Self::Open { still } => f.debug_struct("Open").field("still", still).finish(),
-            Self::Close { sent_frame, still } => f.debug_struct("Close").field("sent_frame", sent_frame).field("still", still).finish(),
+            Self::Close { sent_ns, still } => f.debug_struct("Close").field("sent_ns", sent_ns).field("still", still).finish(),
             Self::Locating { job } => {
                 let result = job.as_ref().and_then(PendingJob::collected).map(|r| Plate(r.as_ref().map_err(ToString::to_string)));
                 f.debug_struct("Locating").field("submitted", &job.as_ref().map(PendingJob::submitted_frame)).field("result", &result).finish()
@@ -65,50 +65,52 @@ impl fmt::Debug for Stage {
 }
 
 pub struct AcquireGripper {
-    start_frame: u64,
+    start_ns: u64,
     stage: Stage,
     open: Option<[ImageBuf; 2]>,
     closed: Option<[ImageBuf; 2]>,
 }
 
 /// Arm still and the jaws where asked. Jaws closing on nothing may keep pushing against
-/// each other without ever reporting `GRIPPER_SETTLED`; after `patience` frames in the asked
-/// state they count as still too (the fingers stop moving visibly long before).
-fn still(c: &Cycle<'_>, closed: bool, frames_in_state: u64, patience: u64) -> bool {
+/// each other without ever reporting `GRIPPER_SETTLED`; after [`JAW_PATIENCE_S`] of camera
+/// time in the asked state they count as still too (the fingers stop moving visibly long
+/// before).
+fn still(c: &Cycle<'_>, closed: bool, since_ns: u64) -> bool {
     let f = c.robot.flags;
     let jaws = (f & robot_flags::GRIPPER_CLOSED != 0) == closed;
-    f & robot_flags::MOVING == 0 && jaws && (f & robot_flags::GRIPPER_SETTLED != 0 || frames_in_state >= patience)
+    f & robot_flags::MOVING == 0 && jaws && (f & robot_flags::GRIPPER_SETTLED != 0 || elapsed_at_least(since_ns, c.time_ns, JAW_PATIENCE_S))
 }
 
+/// How long jaws in the asked state may keep reporting unsettled, s.
+const JAW_PATIENCE_S: f64 = 1.0;
+
 impl AcquireGripper {
-    pub fn new(frame_index: u64) -> Self {
-        Self { start_frame: frame_index, stage: Stage::Open { still: 0 }, open: None, closed: None }
+    pub fn new(time_ns: u64) -> Self {
+        Self { start_ns: time_ns, stage: Stage::Open { still: 0 }, open: None, closed: None }
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.acquire.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.acquire.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("acquire_gripper: timed out after {} s in stage {:?}", m.cfg.acquire.timeout_s, self.stage));
         }
         let settle = m.cfg.acquire.settle_frames;
-        let patience = m.cfg.frames(1.0);
         match &mut self.stage {
             Stage::Open { still: n } => {
-                let since = c.frame_index - self.start_frame;
-                *n = if still(c, false, since, patience) { *n + 1 } else { 0 };
+                *n = if still(c, false, self.start_ns) { *n + 1 } else { 0 };
                 if *n > settle {
                     // Allocates once: the open pair, kept for the difference.
                     self.open = Some([c.left.to_owned(), c.right.to_owned()]);
-                    self.stage = Stage::Close { sent_frame: None, still: 0 };
+                    self.stage = Stage::Close { sent_ns: None, still: 0 };
                     m.reporting.set_status("acquire gripper: jaws open, closing");
                 }
                 Step::Stay(Cmd::gripper(GripperCommand::Open))
             }
-            Stage::Close { sent_frame, still: n } => {
-                let Some(sent) = *sent_frame else {
-                    *sent_frame = Some(c.frame_index);
+            Stage::Close { sent_ns, still: n } => {
+                let Some(sent) = *sent_ns else {
+                    *sent_ns = Some(c.time_ns);
                     return Step::Stay(Cmd::gripper(GripperCommand::Close));
                 };
-                *n = if still(c, true, c.frame_index - sent, patience) { *n + 1 } else { 0 };
+                *n = if still(c, true, sent) { *n + 1 } else { 0 };
                 if *n > settle {
                     self.closed = Some([c.left.to_owned(), c.right.to_owned()]);
                     self.stage = Stage::Locating { job: None };
@@ -211,7 +213,7 @@ mod tests {
     #[test]
     fn the_time_out_names_the_stage_as_before() {
         assert_eq!(format!("{:?}", Stage::Locating { job: None }), "Locating { submitted: None, result: None }");
-        assert_eq!(format!("{:?}", Stage::Close { sent_frame: Some(4), still: 2 }), "Close { sent_frame: Some(4), still: 2 }");
+        assert_eq!(format!("{:?}", Stage::Close { sent_ns: Some(4), still: 2 }), "Close { sent_ns: Some(4), still: 2 }");
         let mut worker = crate::phase::job::spawn_worker().unwrap();
         let mut job = PendingJob::submit(&mut worker, 7, || Err(LocatePlatesError::Plate { view: "left", source: PlateError::NoMotion }));
         while job.as_ref().is_some_and(|j| j.collected().is_none()) {

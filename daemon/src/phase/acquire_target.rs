@@ -13,18 +13,18 @@ use super::step::{timed_out, Cmd, Cycle, Step};
 use crate::mission::{Mission, TargetSource};
 
 pub struct AcquireTarget {
-    start_frame: u64,
+    start_ns: u64,
     started: bool,
     frames: u32,
 }
 
 impl AcquireTarget {
-    pub fn new(frame_index: u64) -> Self {
-        Self { start_frame: frame_index, started: false, frames: 0 }
+    pub fn new(time_ns: u64) -> Self {
+        Self { start_ns: time_ns, started: false, frames: 0 }
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.target.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.target.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("acquire_target: timed out after {} s", m.cfg.target.timeout_s));
         }
         if !self.started {

@@ -80,8 +80,8 @@ impl CalibrationView {
 }
 
 pub struct Calibrate {
-    start_frame: u64,
-    stage_frame: u64,
+    start_ns: u64,
+    stage_ns: u64,
     stage: Stage,
     yaw_rad: f64,
     robot_m: Vec<Vector3<f64>>,
@@ -93,10 +93,10 @@ pub struct Calibrate {
 }
 
 impl Calibrate {
-    pub fn new(frame_index: u64) -> Self {
+    pub fn new(time_ns: u64) -> Self {
         Self {
-            start_frame: frame_index,
-            stage_frame: frame_index,
+            start_ns: time_ns,
+            stage_ns: time_ns,
             stage: Stage::Moving { i: 0, wait: None },
             yaw_rad: f64::NAN,
             robot_m: Vec::with_capacity(16),
@@ -113,7 +113,7 @@ impl Calibrate {
         let cfg = CalibrationView::of(&m.cfg.calibration);
         let points = cfg.points;
         let limit = cfg.point_timeout_s * (points as f64 + 2.0);
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, limit) {
+        if timed_out(self.start_ns, c.time_ns, limit) {
             return Step::fail(FailureKind::TimedOut, format!("calibrate: timed out after {limit:.0} s at {:?}", self.stage));
         }
         if self.yaw_rad.is_nan() {
@@ -124,11 +124,11 @@ impl Calibrate {
                 let i = *i;
                 let Some(w) = wait else {
                     *wait = Some(MoveWait::new(c.seq, c.frame_index));
-                    self.stage_frame = c.frame_index;
+                    self.stage_ns = c.time_ns;
                     m.reporting.set_status("calibrate: visiting the cage");
                     return Step::Stay(Cmd::move_to(m.cfg.calibration.cage_m[i], self.yaw_rad, cfg.speed_mps));
                 };
-                if timed_out(&m.cfg, self.stage_frame, c.frame_index, cfg.point_timeout_s) {
+                if timed_out(self.stage_ns, c.time_ns, cfg.point_timeout_s) {
                     return Step::fail(FailureKind::TimedOut, format!("calibrate: cage point {i} {:?} not reached in {} s", m.cfg.calibration.cage_m[i], cfg.point_timeout_s));
                 }
                 match w.poll(c, cfg.settle_frames) {

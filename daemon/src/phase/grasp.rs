@@ -7,7 +7,7 @@ use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, GripperCommand, RejectReason};
 
-use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use super::step::{elapsed_at_least, timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
 use crate::mission::Mission;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -20,18 +20,18 @@ enum GraspStage {
 }
 
 pub struct Grasp {
-    start_frame: u64,
+    start_ns: u64,
     stage: GraspStage,
     approach_m: [f64; 3],
 }
 
 impl Grasp {
-    pub fn new(frame_index: u64, approach_m: [f64; 3]) -> Self {
-        Self { start_frame: frame_index, stage: GraspStage::Forward { wait: None }, approach_m }
+    pub fn new(time_ns: u64, approach_m: [f64; 3]) -> Self {
+        Self { start_ns: time_ns, stage: GraspStage::Forward { wait: None }, approach_m }
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.grasp.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("grasp: timed out after {} s in {:?}", m.cfg.grasp.timeout_s, self.stage));
         }
         let speed = m.cfg.grasp.approach_speed_mps;
@@ -84,12 +84,12 @@ impl Grasp {
                 }
             }
             GraspStage::Close { since } => {
-                let since = *since.get_or_insert(c.frame_index);
+                let since = *since.get_or_insert(c.time_ns);
                 // Jaws squeezing an object may never report GRIPPER_SETTLED (the fingers keep
                 // trembling against it); after twice the closing time the grip is what it is.
                 let settled = c.robot.flags & robot_flags::GRIPPER_SETTLED != 0;
-                let elapsed = c.frame_index - since;
-                if elapsed < m.cfg.frames(m.cfg.grasp.close_s) || (!settled && elapsed < m.cfg.frames(2.0 * m.cfg.grasp.close_s)) {
+                let close_s = m.cfg.grasp.close_s;
+                if !elapsed_at_least(since, c.time_ns, close_s) || (!settled && !elapsed_at_least(since, c.time_ns, 2.0 * close_s)) {
                     return Step::Stay(Cmd::HOLD);
                 }
                 let width = f64::from(c.robot.gripper_width_m);
@@ -105,17 +105,17 @@ impl Grasp {
 }
 
 pub struct Lift {
-    start_frame: u64,
+    start_ns: u64,
     wait: Option<MoveWait>,
 }
 
 impl Lift {
-    pub fn new(frame_index: u64) -> Self {
-        Self { start_frame: frame_index, wait: None }
+    pub fn new(time_ns: u64) -> Self {
+        Self { start_ns: time_ns, wait: None }
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.grasp.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.grasp.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("lift: timed out after {} s", m.cfg.grasp.timeout_s));
         }
         let Some(w) = self.wait.as_mut() else {

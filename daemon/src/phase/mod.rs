@@ -35,7 +35,7 @@ pub enum PhaseState {
     Servo(Box<servo::ServoPhase>),
     Grasp(grasp::Grasp),
     Lift(grasp::Lift),
-    Done { since_frame: u64 },
+    Done { since_ns: u64 },
     Failed,
     Stopped,
 }
@@ -77,24 +77,24 @@ impl PhaseState {
             && matches!(self, Self::AcquireTarget(_))
             && m.next_target(&fault.detail)
         {
-            *self = Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index));
+            *self = Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns));
             return Step::Stay(Cmd::HOLD);
         }
         if let Step::Next(_) = step {
             *self = match self {
-                Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.frame_index)),
+                Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.time_ns)),
                 // With a target from the operator hint there is nothing to plan.
-                Self::Calibrate(_) if m.targeting.target().is_some() => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
-                Self::Calibrate(_) => Self::Plan(plan::PlanPhase::new(c.frame_index)),
-                Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
+                Self::Calibrate(_) if m.targeting.target().is_some() => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
+                Self::Calibrate(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
+                Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),
-                    Err(fault) if m.next_target(&fault.detail) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.frame_index)),
+                    Err(fault) if m.next_target(&fault.detail) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
                     Err(fault) => return Step::Fail(fault),
                 },
-                Self::Servo(p) => Self::Grasp(grasp::Grasp::new(c.frame_index, p.approach_m)),
-                Self::Grasp(_) => Self::Lift(grasp::Lift::new(c.frame_index)),
-                Self::Lift(_) => Self::Done { since_frame: c.frame_index },
+                Self::Servo(p) => Self::Grasp(grasp::Grasp::new(c.time_ns, p.approach_m)),
+                Self::Grasp(_) => Self::Lift(grasp::Lift::new(c.time_ns)),
+                Self::Lift(_) => Self::Done { since_ns: c.time_ns },
                 Self::Done { .. } | Self::Failed | Self::Stopped => Self::Failed,
             };
         }

@@ -46,7 +46,7 @@ impl fmt::Debug for Stage {
 }
 
 pub struct PlanPhase {
-    start_frame: u64,
+    start_ns: u64,
     stage: Stage,
     /// Gripper tracker update counts when the pair was handed over.
     updates_at_submit: [u64; 2],
@@ -108,8 +108,8 @@ fn gripper_masks(m: &Mission, yaw_rad: f64) -> Option<[Vec<[f64; 2]>; 2]> {
 }
 
 impl PlanPhase {
-    pub fn new(frame_index: u64) -> Self {
-        Self { start_frame: frame_index, stage: Stage::Park { wait: None }, updates_at_submit: [0; 2] }
+    pub fn new(time_ns: u64) -> Self {
+        Self { start_ns: time_ns, stage: Stage::Park { wait: None }, updates_at_submit: [0; 2] }
     }
 
     fn gripper_updates(m: &Mission) -> [u64; 2] {
@@ -117,7 +117,7 @@ impl PlanPhase {
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.plan.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.plan.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("plan: timed out after {} s at {:?}", m.cfg.plan.timeout_s, self.stage));
         }
         match &mut self.stage {

@@ -116,7 +116,7 @@ impl TargetMean {
 }
 
 pub struct ServoPhase {
-    start_frame: u64,
+    start_ns: u64,
     stage: Stage,
     wait: Option<MoveWait>,
     servo: CoplanarityServo,
@@ -268,7 +268,7 @@ impl ServoPhase {
         let mut target_recent = TargetMean::default();
         target_recent.add(&target);
         Ok(Self {
-            start_frame: c.frame_index,
+            start_ns: c.time_ns,
             stage: Stage::Approach,
             wait: None,
             servo,
@@ -288,7 +288,7 @@ impl ServoPhase {
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
-        if timed_out(&m.cfg, self.start_frame, c.frame_index, m.cfg.servo.convergence.timeout_s) {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.servo.convergence.timeout_s) {
             return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.convergence.timeout_s, m.servo.steps()));
         }
         // Every frame adds to the target's running means (it stands still; the arm moves).

@@ -1,13 +1,12 @@
 //! What every phase shares: the command a phase asks for ([`Cmd`]), what it decided
 //! ([`Step`]), what it sees of one cycle ([`Cycle`]), waiting for a commanded move to finish
-//! ([`MoveWait`]) and time-outs counted in frames.
+//! ([`MoveWait`]) and time-outs on the camera clock ([`crate::camera_clock`]).
 
 use handeye_vision::image::ImageView;
 use handeye_vision::tracker::StereoStates;
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, CommandKind, GripperCommand, RobotState};
 
-use crate::config::DaemonConfig;
 use crate::fault::Fault;
 
 /// What a phase asks the robot for this frame (the hard loop stamps seq, frame and time).
@@ -61,8 +60,10 @@ impl Step {
 
 /// Everything a phase sees of one cycle.
 pub struct Cycle<'a> {
-    /// Frames processed since start (0-based), the daemon's clock for time-outs.
+    /// Frames processed since start (0-based): what settle and converge counts count.
     pub frame_index: u64,
+    /// Camera time of this frame since the first, ns: the daemon's clock for time-outs.
+    pub time_ns: u64,
     pub frame_id: u64,
     /// The newest robot state (the hard loop refuses to run phases without one).
     pub robot: &'a RobotState,
@@ -119,7 +120,20 @@ impl MoveWait {
     }
 }
 
-/// `true` when `frame_index` is past `start + timeout_s` frames.
-pub fn timed_out(cfg: &DaemonConfig, start_frame: u64, frame_index: u64, timeout_s: f64) -> bool {
-    frame_index.saturating_sub(start_frame) > cfg.frames(timeout_s)
+/// Slack for capture stamps rounded to whole nanoseconds (a simulator's 1/30 s), ns.
+const STAMP_SLACK_NS: u64 = 1_000;
+
+/// Seconds → ns of camera time (negative or NaN: 0).
+fn ns(seconds: f64) -> u64 {
+    if seconds.is_finite() && seconds > 0.0 { (seconds * 1e9).min(u64::MAX as f64) as u64 } else { 0 }
+}
+
+/// `true` when at least `seconds` of camera time lie between `start_ns` and `now_ns`.
+pub fn elapsed_at_least(start_ns: u64, now_ns: u64, seconds: f64) -> bool {
+    now_ns.saturating_sub(start_ns).saturating_add(STAMP_SLACK_NS) >= ns(seconds)
+}
+
+/// `true` when `now_ns` is past `start_ns + timeout_s` of camera time.
+pub fn timed_out(start_ns: u64, now_ns: u64, timeout_s: f64) -> bool {
+    now_ns.saturating_sub(start_ns) > ns(timeout_s).saturating_add(STAMP_SLACK_NS)
 }
