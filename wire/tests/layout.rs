@@ -49,7 +49,7 @@ fn robot_command_offsets_match_the_readme() {
 
 #[test]
 fn telemetry_offsets_match_the_readme() {
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (520, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (528, 8));
     assert_eq!(offset_of!(Telemetry, phase), 4);
     assert_eq!(offset_of!(Telemetry, frame_id), 8);
     assert_eq!(offset_of!(Telemetry, time_ns), 16);
@@ -64,4 +64,5 @@ fn telemetry_offsets_match_the_readme() {
     assert_eq!(offset_of!(Telemetry, servo_steps), 416);
     assert_eq!(offset_of!(Telemetry, planning), 420);
     assert_eq!(offset_of!(Telemetry, reason), 424);
+    assert_eq!(offset_of!(Telemetry, dropped_frames), 520);
 }
