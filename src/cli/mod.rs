@@ -7,6 +7,7 @@ pub mod camera;
 pub mod daemon;
 pub mod domain;
 pub mod feed;
+pub mod hint;
 pub mod monitor;
 pub mod plan;
 pub mod record;
