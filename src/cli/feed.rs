@@ -189,22 +189,12 @@ pub fn load_sequence(dir: &Path, mono: bool) -> Result<Sequence> {
 }
 
 fn png_size(path: &Path) -> Result<(u32, u32)> {
-    image::ImageReader::open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?
-        .into_dimensions()
-        .with_context(|| format!("{} is not a readable PNG", path.display()))
+    Ok(super::png::read_size(path)?)
 }
 
 /// Decodes `path` as 8-bit gray (see [`FeedArgs`] for the conversion), checking its size.
 pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayImage> {
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?
-        .decode()
-        .with_context(|| format!("cannot decode {}", path.display()))?;
-    let gray = match img {
-        image::DynamicImage::ImageLuma8(g) => g,
-        other => other.to_luma8(),
-    };
+    let gray = super::png::read_gray(path)?;
     if gray.dimensions() != (width, height) {
         bail!("{} is {}x{} but the sequence is {width}x{height}", path.display(), gray.width(), gray.height());
     }

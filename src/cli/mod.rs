@@ -10,6 +10,7 @@ pub mod feed;
 pub mod hint;
 pub mod monitor;
 pub mod plan;
+pub mod png;
 pub mod record;
 pub mod recording;
 pub mod report;
