@@ -95,7 +95,14 @@ pub fn decode_gray(bytes: &[u8]) -> Result<GrayImage, PngReject> {
         return Err(PngReject::NotPng);
     }
     let reader = || ImageReader::with_format(Cursor::new(bytes), ImageFormat::Png);
-    let (width, height) = reader().into_dimensions().map_err(|e| PngReject::Header(e.to_string()))?;
+    let (width, height) = reader().into_dimensions().map_err(|e| match e {
+        // The PNG decoder's own memory limit, hit by a huge declared size.
+        image::ImageError::Limits(l) => {
+            let (width, height) = declared_size(bytes).unwrap_or_default();
+            PngReject::TooLarge { width, height, why: limit_text(&l) }
+        }
+        other => PngReject::Header(other.to_string()),
+    })?;
     check_size(width, height, raw_bits_per_pixel(bytes), bytes.len() as u64)?;
     let mut decoder = reader();
     let mut limits = Limits::default();
@@ -132,6 +139,13 @@ fn check_size(width: u32, height: u32, bits_per_pixel: Option<u64>, file_len: u6
         return Err(PngReject::TooLarge { width, height, why: "more image data than the file can hold (truncated or forged header)" });
     }
     Ok(())
+}
+
+/// Width and height as the IHDR chunk declares them, if it is there.
+fn declared_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    let ihdr = bytes.get(8..8 + 8 + 13)?;
+    let word = |at: usize| u32::from_be_bytes([ihdr[at], ihdr[at + 1], ihdr[at + 2], ihdr[at + 3]]);
+    (&ihdr[4..8] == b"IHDR").then(|| (word(8), word(12)))
 }
 
 /// Bits per pixel of the raw data from the IHDR chunk (right after the signature), if it is
@@ -211,6 +225,12 @@ mod tests {
     fn grey_and_colour_decode_to_grey() {
         let g = decode_gray(&forged(3, 2, (3, 2))).unwrap();
         assert_eq!((g.width(), g.height(), g.as_raw().clone()), (3, 2, vec![7; 6]));
+        // Pure white in 8-bit RGB and in 16-bit grey: both 255 after conversion.
+        for (pixels, colour) in [(vec![255u8; 3], image::ExtendedColorType::Rgb8), (vec![255u8; 2], image::ExtendedColorType::L16)] {
+            let mut bytes = Vec::new();
+            image::codecs::png::PngEncoder::new(&mut bytes).write_image(&pixels, 1, 1, colour).unwrap();
+            assert_eq!(decode_gray(&bytes).unwrap().as_raw(), &vec![255], "{colour:?}");
+        }
     }
 
     #[test]
