@@ -9,6 +9,9 @@
 //!
 //! `make test` runs the short test; `make fuzz` the `#[ignore]`d long one.
 
+// Decoders take `&S::Value` of their proptest strategy (`&String`, `&Vec<u8>`).
+#![allow(clippy::ptr_arg)]
+
 mod fuzz_support;
 
 #[path = "../src/cli/png.rs"]

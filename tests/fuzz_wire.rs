@@ -7,6 +7,9 @@
 //! `make test` runs the short tests; `make fuzz` the `#[ignore]`d `*_long` ones at 10⁶
 //! cases per decoder.
 
+// Decoders take `&S::Value` of their proptest strategy (`&String`, `&Vec<u8>`).
+#![allow(clippy::ptr_arg)]
+
 mod fuzz_support;
 
 use std::path::Path;
