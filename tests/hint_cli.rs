@@ -1,7 +1,8 @@
 //! `handeye hint` on a simulator snapshot: the hint for the facet at a pixel has that face's
 //! corners (ground truth, `truth.json`) within 3 px in both views, vertex for vertex, and
-//! the depth of the block behind it; a pixel on the table, or no stereo model, is an error
-//! that says why, and writes no hint.
+//! the depth of the block behind it; a pixel on the table, no stereo model, or no robot
+//! coordinates for the depth without `--depth-mm`, is an error that says what to supply, and
+//! writes no hint.
 //!
 //! Needs a Vulkan (or GL) adapter for the snapshot: lavapipe on GPU-less machines (`make
 //! setup` installs it).
@@ -159,7 +160,7 @@ fn hint_at_a_facet_pixel_has_the_facets_corners_in_both_views() {
 }
 
 #[test]
-fn a_pixel_on_the_table_or_no_stereo_model_is_an_error_not_a_hint() {
+fn a_table_pixel_no_stereo_model_or_an_unmeasurable_depth_is_an_error_not_a_hint() {
     let snap = snapshot("pick_cube.toml", "table");
     let (faces, all_left, _) = target_faces(&snap.0);
     let front = faces.iter().max_by(|a, b| a.visible_px.total_cmp(&b.visible_px)).expect("a target face");
@@ -174,6 +175,21 @@ fn a_pixel_on_the_table_or_no_stereo_model_is_an_error_not_a_hint() {
     assert!(!o.status.success(), "a table pixel gave a hint: {}", String::from_utf8_lossy(&o.stdout));
     assert!(err.contains("no facet at") && err.contains("Nearest: facet"), "{err}");
     assert!(!out.exists(), "no hint may be written");
+
+    // Correspondences without robot coordinates: the facet is found but its depth cannot be
+    // measured, and the error says to give it; with --depth-mm the hint is written.
+    let cage_json: Value = serde_json::from_str(&std::fs::read_to_string(&cage).expect("cage.json")).expect("cage.json is JSON");
+    let pixels_only = snap.0.join("cage-pixels-only.json");
+    std::fs::write(&pixels_only, serde_json::json!({ "left_px": cage_json["left_px"], "right_px": cage_json["right_px"] }).to_string()).expect("write points");
+    let at = centroid(&front.views[0]).map(f64::round);
+    let o = hint(&snap.0, at, &["--points", pixels_only.to_str().unwrap()], &out);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--depth-mm") && err.contains("robot coordinates"), "{err}");
+    assert!(!out.exists(), "no hint may be written");
+    let o = hint(&snap.0, at, &["--points", pixels_only.to_str().unwrap(), "--depth-mm", "40"], &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(OperatorHint::load(&out).expect("hint").depth_mm, 40.0);
+    std::fs::remove_file(&out).expect("remove hint");
 
     // No stereo model: the error names the flags and where the file comes from.
     let o = hint(&snap.0, centroid(&front.views[0]).map(f64::round), &[], &out);
