@@ -288,7 +288,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
             next_send = (next_send + period).max(Instant::now());
         } else if let (Rate::Recorded, Some((_, offset_ns)), Some(t0)) = (rate, stamp, replay_start_ns) {
             // Late frames go at once: a replay keeps every frame, and its stamps keep the timing.
-            let due_ns = t0 + offset_ns;
+            let due_ns = t0.saturating_add(offset_ns);
             let now_ns = monotonic_ns();
             if due_ns > now_ns && !node.sleep(Duration::from_nanos(due_ns - now_ns)) {
                 interrupted = true;
@@ -313,7 +313,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
         let result = match stamp {
             Some((id, offset_ns)) => {
                 let t0 = *replay_start_ns.get_or_insert_with(monotonic_ns);
-                publisher.publish_with_id(id, t0 + offset_ns, fill)
+                publisher.publish_with_id(id, t0.saturating_add(offset_ns), fill)
             }
             None => publisher.publish(monotonic_ns(), fill),
         };
