@@ -39,8 +39,8 @@ test: setup
 # The long fuzz run (issue 21; `make test` runs the short one): FUZZ_CASES cases per decoder
 # (stereo header and payload, robot state, robot command, telemetry, hint.json, scenario
 # TOML, daemon.toml, PNG, a recording's frames.jsonl, the --points / --calib files of plan
-# and hint), seeded from the clock (HANDEYE_FUZZ_SEED=N replays a run); one
-# JSON line per decoder (cases, seconds, outcomes by reason) in target/fuzz-report.jsonl.
+# and hint), seeded from the clock (HANDEYE_FUZZ_SEED=N replays a run); one JSON line per
+# decoder (cases, seconds, outcomes by reason) in target/fuzz-report.jsonl.
 FUZZ_CASES ?= 1000000
 fuzz:
 	@mkdir -p target && rm -f $(CURDIR)/target/fuzz-report.jsonl

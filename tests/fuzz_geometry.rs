@@ -73,13 +73,27 @@ fn json_inputs(bases: Vec<Value>) -> impl Strategy<Value = String> {
     ]
 }
 
-/// A scratch file per test thread: the loaders read files.
+/// This test thread's scratch folder: the loaders read files.
+fn scratch_dir() -> PathBuf {
+    let thread = format!("{:?}", std::thread::current().id()).replace(|c: char| !c.is_ascii_alphanumeric(), "");
+    std::env::temp_dir().join(format!("handeye-fuzz-geometry-{}-{thread}", std::process::id()))
+}
+
 fn scratch(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("handeye-fuzz-geometry-{}", std::process::id()));
+    let dir = scratch_dir();
     std::fs::create_dir_all(&dir).expect("scratch dir");
-    let path = dir.join(format!("{name}-{:?}.json", std::thread::current().id()).replace(['(', ')'], ""));
+    let path = dir.join(format!("{name}.json"));
     std::fs::write(&path, text).expect("write scratch file");
     path
+}
+
+/// Removes the thread's scratch folder when a test ends.
+struct CleanUp;
+
+impl Drop for CleanUp {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(scratch_dir());
+    }
 }
 
 /// The reason of a refusal: the field it names (between backticks), or what failed.
@@ -128,6 +142,7 @@ fn alloc_bound(text: &String) -> usize {
 
 #[test]
 fn points_json() {
+    let _clean = CleanUp;
     let counts = Fuzz::short("points_json", 3000).run(json_inputs(vec![cage(), point_list()]), alloc_bound, decode_points);
     assert_coverage("points_json", &counts, &["json", "too_few", "left_px", "points_m"]);
 }
@@ -135,11 +150,13 @@ fn points_json() {
 #[test]
 #[ignore = "long fuzz run: make fuzz"]
 fn points_json_long() {
+    let _clean = CleanUp;
     Fuzz::long("points_json").run(json_inputs(vec![cage(), point_list()]), alloc_bound, decode_points);
 }
 
 #[test]
 fn calib_json() {
+    let _clean = CleanUp;
     let counts = Fuzz::short("calib_json", 3000).run(json_inputs(vec![calib()]), alloc_bound, decode_calib);
     assert_coverage("calib_json", &counts, &["json", "m", "c", "disparity_range_px"]);
 }
@@ -147,5 +164,6 @@ fn calib_json() {
 #[test]
 #[ignore = "long fuzz run: make fuzz"]
 fn calib_json_long() {
+    let _clean = CleanUp;
     Fuzz::long("calib_json").run(json_inputs(vec![calib()]), alloc_bound, decode_calib);
 }
