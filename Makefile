@@ -6,7 +6,7 @@ export HANDEYE_DATA
 # Each data-dependent test that finds no data appends a line here; `make test` lists them.
 SKIPPED_LOG := $(CURDIR)/target/skipped-tests.log
 
-.PHONY: all setup build test demo clean
+.PHONY: all setup build test demo clean fuzz
 
 all: build
 
@@ -44,6 +44,18 @@ test: setup
 kill: setup
 	@xdg=$${XDG_RUNTIME_DIR:-$$(mktemp -d)}; \
 	XDG_RUNTIME_DIR=$$xdg $(CARGO) test --test kill_random fifty_random_kills -- --ignored --nocapture
+
+# The long fuzz run (issue 21; `make test` runs the short one): FUZZ_CASES cases per decoder
+# (stereo header and payload, robot state, robot command, telemetry, hint.json, scenario
+# TOML, daemon.toml, PNG, a recording's frames.jsonl, the --points / --calib files of plan
+# and hint), seeded from the clock (HANDEYE_FUZZ_SEED=N replays a run); one JSON line per
+# decoder (cases, seconds, outcomes by reason) in target/fuzz-report.jsonl.
+FUZZ_CASES ?= 1000000
+fuzz:
+	@mkdir -p target && rm -f $(CURDIR)/target/fuzz-report.jsonl
+	HANDEYE_FUZZ_CASES=$(FUZZ_CASES) HANDEYE_FUZZ_REPORT=$(CURDIR)/target/fuzz-report.jsonl \
+	    $(CARGO) test --test fuzz_wire --test fuzz_config --test fuzz_png --test fuzz_recording --test fuzz_geometry -- --ignored --nocapture --test-threads 1
+	@echo "make fuzz: per-decoder counts and times in target/fuzz-report.jsonl"
 
 # Installs, builds, runs the headline job and says where its output is.
 demo: build

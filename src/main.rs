@@ -48,6 +48,8 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Find planar facets in one stereo pair: polygons in both views, 3-D corners.
     Plan(cli::plan::PlanArgs),
+    /// Write hint.json for the planar facet at a left-view pixel, from the planner's facets.
+    Hint(cli::hint::HintArgs),
     Batch(cli::batch::BatchArgs),
     /// Measure handeye's parts: transport, tracker, render, planner, loop.
     Bench(cli::bench::BenchArgs),
@@ -68,6 +70,7 @@ fn main() -> Result<()> {
         Command::Daemon(args) => cli::daemon::run(args),
         Command::Run(args) => cli::run::run(args),
         Command::Plan(args) => cli::plan::run(args),
+        Command::Hint(args) => cli::hint::run(args),
         Command::Batch(args) => cli::batch::run(args),
         Command::Bench(args) => cli::bench::run(args),
     }

@@ -197,22 +197,12 @@ pub fn load_sequence(dir: &Path, mono: bool) -> Result<Sequence> {
 }
 
 fn png_size(path: &Path) -> Result<(u32, u32)> {
-    image::ImageReader::open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?
-        .into_dimensions()
-        .with_context(|| format!("{} is not a readable PNG", path.display()))
+    Ok(super::png::read_size(path)?)
 }
 
 /// Decodes `path` as 8-bit gray (see [`FeedArgs`] for the conversion), checking its size.
 pub fn decode_gray(path: &Path, width: u32, height: u32) -> Result<image::GrayImage> {
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?
-        .decode()
-        .with_context(|| format!("cannot decode {}", path.display()))?;
-    let gray = match img {
-        image::DynamicImage::ImageLuma8(g) => g,
-        other => other.to_luma8(),
-    };
+    let gray = super::png::read_gray(path)?;
     if gray.dimensions() != (width, height) {
         bail!("{} is {}x{} but the sequence is {width}x{height}", path.display(), gray.width(), gray.height());
     }
@@ -321,7 +311,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
             next_send = (next_send + period).max(Instant::now());
         } else if let (Rate::Recorded, Some((_, offset_ns)), Some(t0)) = (rate, stamp, replay_start_ns) {
             // Late frames go at once: a replay keeps every frame, and its stamps keep the timing.
-            let due_ns = t0 + offset_ns;
+            let due_ns = t0.saturating_add(offset_ns);
             let now_ns = monotonic_ns();
             if due_ns > now_ns && !node.sleep(Duration::from_nanos(due_ns - now_ns)) {
                 interrupted = true;
@@ -346,7 +336,7 @@ pub fn run(args: FeedArgs) -> Result<()> {
         let result = match stamp {
             Some((id, offset_ns)) => {
                 let t0 = *replay_start_ns.get_or_insert_with(monotonic_ns);
-                publisher.publish_with_id(id, t0 + offset_ns, fill)
+                publisher.publish_with_id(id, t0.saturating_add(offset_ns), fill)
             }
             None => publisher.publish_with_id(taken - 1, monotonic_ns(), fill),
         };

@@ -158,7 +158,7 @@ pub fn timed_plan(planner: &mut Planner, left: &ImageBuf, right: &ImageBuf, geo:
 
 /// Loads a PNG as 8-bit grey.
 pub fn load_gray(path: &Path) -> Result<ImageBuf> {
-    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
+    let img = super::png::read_gray(path)?;
     let (w, h) = img.dimensions();
     ImageBuf::from_vec(img.into_raw(), w as usize, h as usize).with_context(|| format!("image {} is empty", path.display()))
 }

@@ -98,6 +98,10 @@ pub struct RecordedFrame {
     pub right: Option<PathBuf>,
 }
 
+/// Largest id or capture time a recording may hold, 2^60 (36 years of nanoseconds): a replay
+/// adds a pass's span to each for every `--loop` pass, which must not overflow.
+pub const MAX_RECORDED_VALUE: u64 = 1 << 60;
+
 /// Reads `frames.jsonl` of the recording folder `dir`. Every error names the file, the line
 /// (from 1) and the field: a missing or mistyped field, ids that do not increase, capture
 /// times that go back.
@@ -119,6 +123,11 @@ pub fn parse_frames(text: &str, path: &Path, dir: &Path) -> Result<Vec<RecordedF
         let Value::Object(object) = value else { bail!("{}: not a JSON object", at()) };
         let id = field_u64(&object, "id").with_context(at)?;
         let capture_time_ns = field_u64(&object, "capture_time_ns").with_context(at)?;
+        for (name, value) in [("id", id), ("capture_time_ns", capture_time_ns)] {
+            if value > MAX_RECORDED_VALUE {
+                bail!("{}: field `{name}`: {value} is beyond 2^60, where a replay's ids and times could not count on", at());
+            }
+        }
         let left = field_file(&object, "left", false).with_context(at)?.unwrap_or_default();
         let right = field_file(&object, "right", true).with_context(at)?;
         if let Some(prev) = frames.last() {
@@ -192,8 +201,10 @@ impl ReplayClock {
     /// the replay's first frame.
     pub fn stamp(&self, index: usize, pass: u64) -> (u64, u64) {
         let (first, s) = (self.stamps[0], self.stamps[index]);
-        let id = s.id + pass * self.id_span;
-        let offset_ns = s.capture_time_ns - first.capture_time_ns + pass * self.time_span_ns;
+        // Read values are at most MAX_RECORDED_VALUE, so a few passes fit; a loop that ran
+        // on for longer than u64 counts stays at the largest value rather than wrapping.
+        let id = s.id.saturating_add(pass.saturating_mul(self.id_span));
+        let offset_ns = (s.capture_time_ns - first.capture_time_ns).saturating_add(pass.saturating_mul(self.time_span_ns));
         (id, offset_ns)
     }
 }
@@ -209,6 +220,24 @@ mod tests {
     const GOOD: &str = r#"{"id":3,"capture_time_ns":1000,"publish_time_ns":1100,"receive_time_ns":1200,"left":"left/00000003.png","right":"right/00000003.png","missed_before":0,"not_kept_before":0}
 {"id":5,"capture_time_ns":67000,"left":"left/00000005.png","right":"right/00000005.png","missed_before":1,"not_kept_before":0}
 "#;
+
+    #[test]
+    fn ids_and_times_a_replay_cannot_count_on_from_are_refused() {
+        // Found by fuzzing (tests/fuzz_recording.rs): ids or capture times near u64::MAX made
+        // the replay clock overflow (a panic in debug builds, wrapped ids in release).
+        for (id, t, field) in [(u64::MAX, 5, "id"), (3, (1u64 << 60) + 1, "capture_time_ns")] {
+            let text = format!("{{\"id\":1,\"capture_time_ns\":1,\"left\":\"l.png\"}}\n{{\"id\":{id},\"capture_time_ns\":{t},\"left\":\"l.png\"}}\n");
+            let err = format!("{:#}", parse(&text).unwrap_err());
+            assert!(err.contains("line 2") && err.contains(field) && err.contains("2^60"), "{err}");
+        }
+        // At the limit a replay loops without overflow, ids increasing.
+        let text = format!("{{\"id\":0,\"capture_time_ns\":0,\"left\":\"l.png\"}}\n{{\"id\":{m},\"capture_time_ns\":{m},\"left\":\"l.png\"}}\n", m = MAX_RECORDED_VALUE);
+        let frames = parse(&text).unwrap();
+        let clock = ReplayClock::new(frames.iter().map(|f| f.stamp).collect());
+        let ids: Vec<u64> = (0..3).flat_map(|pass| (0..2).map(move |i| (i, pass))).map(|(i, pass)| clock.stamp(i, pass).0).collect();
+        assert!(ids.windows(2).all(|w| w[0] < w[1]), "{ids:?}");
+        assert_eq!(clock.stamp(1, u64::MAX), (u64::MAX, u64::MAX));
+    }
 
     #[test]
     fn lines_give_ids_capture_times_and_files_under_the_folder() {

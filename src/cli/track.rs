@@ -273,7 +273,7 @@ pub(crate) fn list_frames(dir: &Path) -> Result<Vec<PathBuf>> {
 
 /// Loads a frame as 8-bit grey.
 pub(crate) fn load_gray(path: &Path) -> Result<ImageBuf> {
-    let img = image::open(path).with_context(|| format!("cannot decode image {}", path.display()))?.to_luma8();
+    let img = super::png::read_gray(path)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     ImageBuf::from_vec(img.into_raw(), w, h).ok_or_else(|| anyhow!("{}: empty image", path.display()))
 }
