@@ -66,8 +66,9 @@ pub struct DaemonArgs {
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Operator hint (JSON): the target facet's corners in both views and its depth in mm
-    /// (`handeye sim --hint-out` writes one; `handeye hint` makes one from a pixel on a stereo pair). Read once at start-up. With a hint nothing is
-    /// planned; without one the daemon plans its own grasp.
+    /// (`handeye sim --hint-out` writes one; `handeye hint` makes one from a pixel on a
+    /// stereo pair). Read once at start-up. With a hint nothing is planned; without one the
+    /// daemon plans its own grasp.
     #[arg(long, value_name = "FILE", conflicts_with = "point_m")]
     hint: Option<PathBuf>,
     /// The operator's indicated point on the working plane, robot frame, metres: `X,Y` or
