@@ -20,20 +20,23 @@ pub struct GestureConfig {
     pub silhouette: SilhouetteConfig,
     /// Frames the lines must hold still before a point is reported (10 at 30 Hz: 1/3 s).
     pub steady_frames: usize,
-    /// Still: over those frames, neither view's line moved more than this at the arm's ends,
-    /// pixels.
+    /// Still: over those frames, the arm's silhouette (its centroid) moved no more than this
+    /// in either view, and the fingertip no more than three times this, pixels.
     pub steady_px: f64,
-    /// An arm in view this many frames without holding still is an unsteady hand (90 at
-    /// 30 Hz: 3 s).
+    /// An arm in view this many frames without holding still is an unsteady hand, or one
+    /// without a line (90 at 30 Hz: 3 s).
     pub unsteady_after_frames: usize,
     /// Fewer changed pixels than this in both views: the scene is quiet and becomes the
     /// background.
     pub quiet_pixels: usize,
+    /// A point less certain than this (one-sigma radius, metres) is reported as uncertain,
+    /// not as the answer: a finger line measured on too little of the arm.
+    pub max_sigma_m: f64,
 }
 
 impl Default for GestureConfig {
     fn default() -> Self {
-        Self { silhouette: SilhouetteConfig::default(), steady_frames: 10, steady_px: 0.6, unsteady_after_frames: 90, quiet_pixels: 30 }
+        Self { silhouette: SilhouetteConfig::default(), steady_frames: 10, steady_px: 1.5, unsteady_after_frames: 90, quiet_pixels: 30, max_sigma_m: 0.008 }
     }
 }
 
@@ -65,8 +68,14 @@ pub enum GestureState {
     /// Still, but the finger's line lies nearly in a plane through both cameras: the plane
     /// lines cross at only `crossing_rad`, and the point is not determined.
     Degenerate { crossing_rad: f64 },
+    /// Still, but the point's one-sigma radius `sigma_m` is over `max_sigma_m`: too little
+    /// of the finger's line was measured to trust where it meets the plane.
+    Uncertain { sigma_m: f64 },
     /// In view for `frames` without holding still.
     Unsteady { frames: usize },
+    /// In view for `frames`, but with no finger line in one view or both (`views` have one):
+    /// seen end-on, hidden, or not shaped like an arm.
+    NoLine { frames: usize, views: usize },
 }
 
 /// Follows one pointing gesture after another.
@@ -133,6 +142,9 @@ impl PointingTracker {
                 return GestureState::Absent;
             }
             self.frames_in_view += 1;
+            if self.frames_in_view > self.config.unsteady_after_frames {
+                return GestureState::NoLine { frames: self.frames_in_view, views };
+            }
             return GestureState::Moving { frames: self.frames_in_view, views };
         };
         self.frames_in_view += 1;
@@ -152,13 +164,15 @@ impl PointingTracker {
         self.indicate()
     }
 
-    /// Every axis of the window within `steady_px` of the newest one at both ends.
+    /// Every silhouette of the window within `steady_px` of the newest one (centroid), and
+    /// its fingertip within three times that.
     fn steady(&self) -> bool {
         let newest = self.history[(self.next + self.history.len() - 1) % self.history.len()];
         self.history.iter().all(|h| {
             (0..2).all(|v| {
                 let (a, b) = (&h[v], &newest[v]);
-                [b.tip_px, b.tail_px].iter().all(|p| distance(&a.line, p) <= self.config.steady_px)
+                let moved = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+                moved(a.centroid_px, b.centroid_px) <= self.config.steady_px && moved(a.tip_px, b.tip_px) <= 3.0 * self.config.steady_px
             })
         })
     }
@@ -192,9 +206,13 @@ impl PointingTracker {
             let p = p / p.xy().norm();
             [p[0], p[1], p[2]]
         };
+        let sigma_m = var.sqrt();
+        if sigma_m > self.config.max_sigma_m {
+            return GestureState::Uncertain { sigma_m };
+        }
         GestureState::Indicated(PointedAt {
             point_m: hit.point_m,
-            sigma_m: var.sqrt(),
+            sigma_m,
             crossing_rad: hit.crossing_rad,
             axes,
             plane_lines: [plane(&self.pointing.left, &axes[0].line), plane(&self.pointing.right, &axes[1].line)],

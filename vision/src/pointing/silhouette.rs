@@ -26,11 +26,17 @@ pub struct SilhouetteConfig {
     pub min_pixels: usize,
     /// The silhouette must be at least this many times longer than wide to have an axis.
     pub min_elongation: f64,
+    /// A cross-section's end on a background edge stronger than this (grey levels across
+    /// 4 px) may be where something in front hides the arm: the section is left out.
+    pub occluder_edge: u8,
+    /// A cross-section counts only if the sections within 3 px of it along the arm have its
+    /// width within this, pixels (away from the steps between finger, hand and forearm).
+    pub max_width_step_px: f64,
 }
 
 impl Default for SilhouetteConfig {
     fn default() -> Self {
-        Self { min_difference: 18, min_neighbours: 4, min_pixels: 300, min_elongation: 2.5 }
+        Self { min_difference: 18, min_neighbours: 4, min_pixels: 300, min_elongation: 1.5, occluder_edge: 20, max_width_step_px: 1.5 }
     }
 }
 
@@ -45,6 +51,8 @@ pub struct ArmAxis {
     pub tail_px: [f64; 2],
     /// Where the fitted midline passes closest to the cross-sections' centroid, pixels.
     pub centre_px: [f64; 2],
+    /// Centroid of the changed pixels (how the whole arm moves), pixels.
+    pub centroid_px: [f64; 2],
     /// Changed pixels in the silhouette.
     pub pixels: usize,
     /// Cross-sections used in the final fit.
@@ -79,7 +87,15 @@ pub struct SilhouetteFinder {
     hi: Vec<f32>,
     border: Vec<bool>,
     mids: Vec<[f64; 3]>,
+    keep: Vec<bool>,
+    /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
+    tip_at_start: bool,
 }
+
+/// Sections on each side of a section that must have its width for it to count, 1 px each.
+const STEP_REACH: usize = 3;
+/// The finger alone gives the line when this many of its sections are clean.
+const MIN_FINGER_SECTIONS: usize = 15;
 
 impl SilhouetteFinder {
     pub fn new(config: SilhouetteConfig) -> Self {
@@ -124,7 +140,57 @@ impl SilhouetteFinder {
             return Err(SilhouetteError::NotElongated);
         }
         let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
-        let (ex, ey) = (theta.cos(), theta.sin());
+        // Sections across the principal direction first, then again across the line that
+        // fit found (a short, cut-off silhouette's principal direction can be well off).
+        let (mut c, mut e) = ([cx, cy], [theta.cos(), theta.sin()]);
+        let mut fit = self.fit_sections(background, c, e)?;
+        for _ in 0..2 {
+            let n = [-e[1], e[0]];
+            let centre = [c[0] + fit.s_mean * e[0] + fit.at(fit.s_mean) * n[0], c[1] + fit.s_mean * e[1] + fit.at(fit.s_mean) * n[1]];
+            let d = [e[0] + fit.b * n[0], e[1] + fit.b * n[1]];
+            let norm = d[0].hypot(d[1]);
+            (c, e) = (centre, [d[0] / norm, d[1] / norm]);
+            fit = self.fit_sections(background, c, e)?;
+        }
+        let ([cx, cy], [ex, ey]) = (c, e);
+        let (nx, ny) = (-ey, ex);
+        // Back to image coordinates: the point at s = mean s, and the direction.
+        let to_image = |s: f64, t: f64| [cx + s * ex + t * nx, cy + s * ey + t * ny];
+        let centre_px = to_image(fit.s_mean, fit.at(fit.s_mean));
+        let dir = [ex + fit.b * nx, ey + fit.b * ny];
+        let line = ImageLine::along(&centre_px, &dir).map_err(|_| SilhouetteError::NotElongated)?;
+        // The tip: the narrower end (a finger against a hand and a forearm).
+        let tip_at_start = self.tip_at_start;
+        // The tip lies at the silhouette's last section at that end (the measured sections
+        // stop short of it, at the fingertip's end face).
+        let offset = self.lo.len() as f64 / 2.0;
+        let filled = |i: &usize| self.lo[*i].is_finite();
+        let (first, last) = ((0..self.lo.len()).find(filled), (0..self.lo.len()).rev().find(filled));
+        let (s_tip, s_tail) = match (tip_at_start, first, last) {
+            (true, Some(i), _) => (i as f64 - offset, fit.s_max),
+            (false, _, Some(i)) => (i as f64 - offset, fit.s_min),
+            (true, None, _) => (fit.s_min, fit.s_max),
+            (false, _, None) => (fit.s_max, fit.s_min),
+        };
+        Ok(ArmAxis {
+            line,
+            tip_px: to_image(s_tip, fit.at(s_tip)),
+            tail_px: to_image(s_tail, fit.at(s_tail)),
+            centre_px,
+            centroid_px: [sx / n as f64, sy / n as f64],
+            pixels: n,
+            sections: fit.count,
+            angle_sigma_rad: fit.b_sigma,
+            offset_sigma_px: fit.a_sigma,
+        })
+    }
+
+    /// Cross-sections of the silhouette perpendicular to direction `e` (unit) through `c`,
+    /// the clean ones' middles in `mids` (s along `e`, t across, width), and the robust line
+    /// `t(s)` through them.
+    fn fit_sections(&mut self, background: &ImageView, c: [f64; 2], e: [f64; 2]) -> Result<LineFit, SilhouetteError> {
+        let (w, h) = (background.width(), background.height());
+        let ([cx, cy], [ex, ey]) = (c, e);
         let (nx, ny) = (-ey, ex);
 
         // Cross-sections: extent across the principal direction per 1 px of length.
@@ -155,50 +221,92 @@ impl SilhouetteFinder {
             let near_border = self.border[s.saturating_sub(2)..(s + 3).min(span)].iter().any(|&b| b);
             if self.lo[s].is_finite() && !near_border {
                 let (lo, hi) = (f64::from(self.lo[s]), f64::from(self.hi[s]));
-                self.mids.push([s as f64 - offset, 0.5 * (lo + hi), hi - lo + 1.0]);
+                // An end of the section on an edge of the scene before the arm came: something
+                // in front of the arm may hide it there (the robot), so its middle is not the
+                // arm's.
+                let along = s as f64 - offset;
+                let on_scene_edge = |t: f64, out: f64| {
+                    let at = |t: f64| sample(background, cx + along * ex + t * nx, cy + along * ey + t * ny);
+                    match (at(t + out * 2.5), at(t - out * 1.5)) {
+                        (Some(a), Some(b)) => (a - b).abs() > f64::from(self.config.occluder_edge),
+                        _ => true,
+                    }
+                };
+                if on_scene_edge(lo, -1.0) || on_scene_edge(hi, 1.0) {
+                    continue;
+                }
+                self.mids.push([along, 0.5 * (lo + hi), hi - lo + 1.0]);
             }
         }
+        // Keep sections inside a part of even width (finger, hand, forearm): where the width
+        // steps (the knuckles, the wrist, the fingertip's end face), the silhouette's edges are
+        // the images of end faces seen at a slant, and their middle is off the axis.
+        let k = STEP_REACH;
+        self.keep.clear();
+        for i in 0..self.mids.len() {
+            let ok = i >= k
+                && i + k < self.mids.len()
+                && self.mids[i + k][0] - self.mids[i - k][0] <= 2.0 * k as f64 + 0.5
+                && (i - k..=i + k).all(|j| (self.mids[j][2] - self.mids[i][2]).abs() <= self.config.max_width_step_px);
+            self.keep.push(ok);
+        }
+        let mut n_keep = 0;
+        for i in 0..self.mids.len() {
+            if self.keep[i] {
+                self.mids[n_keep] = self.mids[i];
+                n_keep += 1;
+            }
+        }
+        self.mids.truncate(n_keep);
         if self.mids.len() < 10 {
             return Err(SilhouetteError::TooFewSections { sections: self.mids.len() });
         }
-        // Robust straight-line fit t = a + b s to the midpoints: least squares, then again
-        // without the sections more than 3 robust sigmas (at least 1 px) off the line.
-        let mut fit = fit_line(&self.mids, |_| true);
-        for _ in 0..3 {
-            let mut dev: f64 = 0.0;
-            let mut count = 0.0;
-            for m in &self.mids {
-                dev += (m[1] - fit.at(m[0])).abs();
-                count += 1.0;
+        // The whole arm's midline, and the finger's alone: the finger's when they disagree
+        // (a hand or forearm seen at a slant, cut by the border or partly hidden, has a
+        // middle off the axis), the whole arm's (longer, so surer) when they agree.
+        let all = robust_fit(&self.mids);
+        let fit = match self.finger_sections() {
+            Some(range) => {
+                let finger = robust_fit(&self.mids[range]);
+                let turn = (all.b - finger.b).abs();
+                let shift = (all.at(finger.s_mean) - finger.a).abs();
+                if turn <= 3.0 * finger.b_sigma + 2e-3 && shift <= 3.0 * finger.a_sigma + 0.5 { all } else { finger }
             }
-            let limit = (3.0 * 1.25 * dev / count).max(1.0);
-            fit = fit_line(&self.mids, |m| (m[1] - fit.at(m[0])).abs() <= limit);
-        }
+            None => all,
+        };
         if fit.count < 10 {
             return Err(SilhouetteError::TooFewSections { sections: fit.count });
         }
-        // Back to image coordinates: the point at s = mean s, and the direction.
-        let to_image = |s: f64, t: f64| [cx + s * ex + t * nx, cy + s * ey + t * ny];
-        let centre_px = to_image(fit.s_mean, fit.at(fit.s_mean));
-        let dir = [ex + fit.b * nx, ey + fit.b * ny];
-        let line = ImageLine::along(&centre_px, &dir).map_err(|_| SilhouetteError::NotElongated)?;
-        // The tip: the narrower end (a finger against a hand and a forearm).
-        let tenth = (fit.count / 10).max(3);
-        let on_line = |m: &&[f64; 3]| (m[1] - fit.at(m[0])).abs() <= fit.limit;
-        let first: f64 = self.mids.iter().filter(on_line).take(tenth).map(|m| m[2]).sum();
-        let last: f64 = self.mids.iter().rev().filter(on_line).take(tenth).map(|m| m[2]).sum();
-        let tip_at_start = first <= last;
-        let (s_tip, s_tail) = if tip_at_start { (fit.s_min, fit.s_max) } else { (fit.s_max, fit.s_min) };
-        Ok(ArmAxis {
-            line,
-            tip_px: to_image(s_tip, fit.at(s_tip)),
-            tail_px: to_image(s_tail, fit.at(s_tail)),
-            centre_px,
-            pixels: n,
-            sections: fit.count,
-            angle_sigma_rad: fit.b_sigma,
-            offset_sigma_px: fit.a_sigma,
-        })
+        Ok(fit)
+    }
+
+    /// The finger's sections (a range of `mids`): the run of narrow sections at the narrow
+    /// end, when there are enough of them. Also decides which end is the tip. The finger is
+    /// the part that points, and the part least often cut by the image border or hidden
+    /// behind the robot.
+    fn finger_sections(&mut self) -> Option<std::ops::Range<usize>> {
+        let n = self.mids.len();
+        let end_width = |it: &mut dyn Iterator<Item = &[f64; 3]>| {
+            let (sum, count) = it.take(5).fold((0.0f64, 0.0f64), |(s, c), m| (s + m[2], c + 1.0));
+            sum / count.max(1.0)
+        };
+        let (first, last) = (end_width(&mut self.mids.iter()), end_width(&mut self.mids.iter().rev()));
+        self.tip_at_start = first <= last;
+        let limit = first.min(last) * 1.5 + 2.0;
+        let run = |order: &mut dyn Iterator<Item = &[f64; 3]>| {
+            let mut count = 0;
+            let mut prev: Option<f64> = None;
+            for m in order {
+                if m[2] > limit || prev.is_some_and(|p| (m[0] - p).abs() > 8.0) {
+                    break;
+                }
+                prev = Some(m[0]);
+                count += 1;
+            }
+            count
+        };
+        let count = if self.tip_at_start { run(&mut self.mids.iter()) } else { run(&mut self.mids.iter().rev()) };
+        (count >= MIN_FINGER_SECTIONS && count < n).then(|| if self.tip_at_start { 0..count } else { n - count..n })
     }
 
     /// Fills `pixels` with the changed pixels that have enough changed neighbours.
@@ -242,14 +350,24 @@ struct LineFit {
     count: usize,
     a_sigma: f64,
     b_sigma: f64,
-    /// The selection limit the next pass uses for "on the line" (3 sigmas, at least 1 px).
-    limit: f64,
 }
 
 impl LineFit {
     fn at(&self, s: f64) -> f64 {
         self.a + self.b * (s - self.s_mean)
     }
+}
+
+/// Least squares, then again three times without the sections more than 3 mean deviations
+/// (at least 1 px) off the line.
+fn robust_fit(mids: &[[f64; 3]]) -> LineFit {
+    let mut fit = fit_line(mids, |_| true);
+    for _ in 0..3 {
+        let dev = mids.iter().map(|m| (m[1] - fit.at(m[0])).abs()).sum::<f64>() / mids.len().max(1) as f64;
+        let limit = (3.0 * 1.25 * dev).max(1.0);
+        fit = fit_line(mids, |m| (m[1] - fit.at(m[0])).abs() <= limit);
+    }
+    fit
 }
 
 fn fit_line(mids: &[[f64; 3]], keep: impl Fn(&[f64; 3]) -> bool) -> LineFit {
@@ -284,6 +402,11 @@ fn fit_line(mids: &[[f64; 3]], keep: impl Fn(&[f64; 3]) -> bool) -> LineFit {
         count: n as usize,
         a_sigma: sigma / n.max(1.0).sqrt(),
         b_sigma: sigma / sss.max(1e-9).sqrt(),
-        limit: (3.0 * sigma).max(1.0),
     }
+}
+
+/// The grey at the nearest pixel to `(x, y)`, if inside the image.
+fn sample(img: &ImageView, x: f64, y: f64) -> Option<f64> {
+    let (xi, yi) = (x.round(), y.round());
+    (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width() && (yi as usize) < img.height()).then(|| f64::from(img.get(xi as usize, yi as usize)))
 }
