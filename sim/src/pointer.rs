@@ -60,7 +60,7 @@ impl PointerGesture {
     pub fn of_scenario(scenario: &Scenario) -> Option<Self> {
         let cfg = scenario.pointer.as_ref()?;
         let p = scenario.indicated_point_m();
-        Some(Self::draw(cfg, DVec3::from_array(p), mix64(scenario.seed ^ 0x504f_494e_5445_52)))
+        Some(Self::draw(cfg, DVec3::from_array(p), mix64(scenario.seed ^ 0x0050_4f49_4e54_4552)))
     }
 
     /// Draws a gesture pointing at `intended_m` (on the working plane) from `seed`.

@@ -13,7 +13,9 @@
 //! Acceptance: the indicated point within 10 mm of the aim point at the median and within
 //! 20 mm at the 90th percentile; degenerate gestures reported, never answered; the block
 //! nearest the indicated point is the one pointed at. Run with
-//! `cargo test -p handeye-sim --test pointing_sim -- --nocapture` to see every gesture.
+//! `cargo test -p handeye-sim --test pointing_sim -- --nocapture` to see every gesture;
+//! with `HANDEYE_POINTING_DEBUG=DIR` it also writes each gesture's last stereo frame and its
+//! background (`seedN.pgm`, `seedN-bg.pgm`) and says what each view's silhouette gave.
 //! Needs a Vulkan adapter (lavapipe on GPU-less machines).
 
 use std::path::Path;
@@ -121,6 +123,8 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
             std::fs::write(dir.join(format!("seed{seed}-bg.pgm")), pgm).unwrap();
             let [l, r] = views(&gray, w, h);
             let [bl, br] = views(&bg, w, h);
+            let t = gesture.truth(&sim.events.cameras, sim.now_ns());
+            eprintln!("seed {seed}: truth {:?}, tip {:?} / {:?} px", t.phase, t.views[0].tip_px, t.views[1].tip_px);
             eprintln!("seed {seed}: left {:?}", finder.find(&bl, &l).map(|a| (a.tip_px, a.tail_px, a.sections)));
             eprintln!("seed {seed}: right {:?} ({} px)", finder.find(&br, &r).map(|a| (a.tip_px, a.tail_px, a.sections)), finder.changed_pixels());
         }

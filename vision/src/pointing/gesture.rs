@@ -56,8 +56,10 @@ pub struct PointedAt {
     pub plane_lines: [[f64; 3]; 2],
 }
 
-/// What one frame showed.
+/// What one frame showed. Returned by value every frame: boxing the large variant would
+/// allocate on every steady frame, which the per-frame update avoids.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(clippy::large_enum_variant)]
 pub enum GestureState {
     /// No arm in view (of both cameras): nothing to do.
     Absent,

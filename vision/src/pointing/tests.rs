@@ -109,8 +109,8 @@ fn a_steady_finger_indicates_its_point_on_the_plane_with_an_honest_uncertainty()
                 assert!(err < 0.004, "gesture {k}: {err} m off (az {az:.0}°, el {el:.0}°)");
                 assert!(p.sigma_m > 0.0 && p.sigma_m < 0.01 && err < 4.0 * p.sigma_m + 0.001, "gesture {k}: {err} m off, sigma {} m", p.sigma_m);
                 // The tip end is found, on the line.
-                for v in 0..2 {
-                    let d = (p.axes[v].tip_px[0] - a[v][0][0]).hypot(p.axes[v].tip_px[1] - a[v][0][1]);
+                for (v, (axis, seen)) in p.axes.iter().zip(&a).enumerate() {
+                    let d = (axis.tip_px[0] - seen[0][0]).hypot(axis.tip_px[1] - seen[0][1]);
                     assert!(d < 3.0, "gesture {k} view {v}: tip {d} px off");
                 }
                 done += 1;
@@ -163,7 +163,7 @@ fn a_hand_that_does_not_hold_still_is_reported_unsteady() {
     let mut tracker = PointingTracker::new(pointing(&rig), config);
     // The hand sways by 3 px, frame to frame.
     let sway = |f: usize| {
-        let d = if f % 2 == 0 { 3.0 } else { -3.0 };
+        let d = if f.is_multiple_of(2) { 3.0 } else { -3.0 };
         a.map(|v| v.map(|p| [p[0] + d, p[1]]))
     };
     assert_eq!(run(&mut tracker, &[scene(5), scene(6)], sway, 40, 3), GestureState::Unsteady { frames: 40 });
