@@ -8,6 +8,7 @@
 //! - [`cell`]: the physical work cell (world, arm, kinematics, controller, block geometry);
 //! - [`render`]: what the cameras see (camera model, scene, shading, the wgpu renderer);
 //! - [`events`]: the scripted disturbances, which change the cell and the views;
+//! - [`pointer`]: the operator's pointing gesture (a hand that is seen, not felt);
 //! - [`simulator`]: the cell, the controller, the events and the success judge stepped in
 //!   simulated time, without I/O;
 //! - [`referee`]: ground truth and judging, read from the simulator;
@@ -21,6 +22,7 @@
 pub mod cell;
 pub mod events;
 pub mod hash;
+pub mod pointer;
 pub mod referee;
 pub mod render;
 pub mod run;

@@ -15,6 +15,7 @@ use crate::cell::follower::Follower;
 use crate::cell::kinematics::{IkError, ToolPose};
 use crate::cell::world::World;
 use crate::events::EventState;
+use crate::pointer::PointerGesture;
 use crate::referee::judge::{SuccessJudge, Verdict};
 use crate::render::scene::{Attach, Scene};
 use crate::render::{FrameInput, Sensor};
@@ -37,6 +38,8 @@ pub struct Simulator {
     /// With an external robot driver: the motors follow its reported pose, and the
     /// controller above is idle (see [`Self::follow_external_robot`]).
     pub follower: Option<Follower>,
+    /// The operator's pointing gesture (`[pointer]`), if any.
+    pub pointer: Option<PointerGesture>,
     judge: SuccessJudge,
     target: usize,
     reading: ArmReading,
@@ -57,7 +60,8 @@ impl Simulator {
         let reading = world.arm.read(&world.physics);
         let events = EventState::new(&scenario);
         let scene = Scene::build(&scenario, &world);
-        Ok(Self { scenario, world, controller, events, scene, follower: None, judge, target, reading, steps: 0, frames: 0 })
+        let pointer = PointerGesture::of_scenario(&scenario);
+        Ok(Self { scenario, world, controller, events, scene, follower: None, pointer, judge, target, reading, steps: 0, frames: 0 })
     }
 
     /// Simulated time now, ns (exact: steps × 10⁹ / rate).
@@ -207,6 +211,7 @@ impl Simulator {
                     Some(DAffine3::from_mat3_translation(rot, pos))
                 }
                 Attach::Occluder(i) => self.events.occluder_position(i, now).map(DAffine3::from_translation),
+                Attach::Pointer => self.pointer.as_ref().and_then(|p| p.pose(now)),
             });
         }
     }

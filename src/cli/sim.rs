@@ -297,6 +297,7 @@ pub fn run(args: SimArgs) -> Result<()> {
                 &scenario.cameras.iter().map(|c| c.position_m).collect::<Vec<_>>(),
             ),
             daemon: runner.watch.clone(),
+            pointer: runner.sim.pointer.as_ref().map(|p| p.truth(&runner.sim.events.cameras, runner.sim.now_ns())),
         };
         if let Some(path) = &args.verdict_out {
             // Write then rename, so that `handeye run` never reads half a report.

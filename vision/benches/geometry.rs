@@ -1,5 +1,5 @@
 //! Timing of the geometry parts of `handeye-vision`: one coplanarity-servo step (runs in the
-//! hard loop), one pointing intersection, grasp planning on a 10-block scene, and gripper
+//! hard loop), one pointing intersection, one per-frame pointing-gesture update, grasp planning on a 10-block scene, and gripper
 //! location by differencing on a 640x480 pair. Run: `cargo bench -p handeye-vision --bench geometry`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -7,7 +7,7 @@ use handeye_vision::affine::AffineStereo;
 use handeye_vision::grasp::{plan_grasps, GraspConfig, GraspScene, SceneFacet, Segment3};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::locate::{locate_moving, LocateConfig};
-use handeye_vision::pointing::{ImageLine, PlaneHomography, Pointing};
+use handeye_vision::pointing::{GestureConfig, ImageLine, PlaneHomography, Pointing, PointingTracker};
 use handeye_vision::servo::{ViewFrame, CoplanarityServo, GripperView, ServoConfig, ServoGoal, ServoModel, StepOutcome, StereoFrame, StereoPoint};
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use std::hint::black_box;
@@ -80,6 +80,44 @@ fn pointing(c: &mut Criterion) {
     let l = ImageLine::through(&see(hl, [0.45, -0.05]), &see(hl, [0.5, 0.02])).unwrap();
     let r = ImageLine::through(&see(hr, [0.58, 0.0]), &see(hr, [0.5, 0.02])).unwrap();
     c.bench_function("pointing: indicated point", |b| b.iter(|| black_box(p.indicate(black_box(&l), black_box(&r)))));
+
+    // The per-frame update of a held pointing gesture: differencing and the finger's line in
+    // both 640x480 views, steadiness, the plane lines' intersection and its uncertainty.
+    let scene = |seed: usize| {
+        let mut img = ImageBuf::filled(640, 480, 40);
+        for k in 0..6 {
+            let (x0, y0, g) = ((seed * 97 + k * 131) % 560, (seed * 53 + k * 71) % 400, (80 + k * 25) as u8);
+            for y in y0..y0 + 50 {
+                for x in x0..x0 + 50 {
+                    img.set(x, y, g);
+                }
+            }
+        }
+        img
+    };
+    let with_arm = |base: &ImageBuf, tip: [f64; 2], elbow: [f64; 2]| {
+        let mut img = base.clone();
+        let (dx, dy) = (elbow[0] - tip[0], elbow[1] - tip[1]);
+        let len = dx.hypot(dy);
+        for y in 0..480 {
+            for x in 0..640 {
+                let (px, py) = (x as f64 - tip[0], y as f64 - tip[1]);
+                let (s, t) = ((px * dx + py * dy) / len, ((-px * dy + py * dx) / len).abs());
+                if (0.0..=len).contains(&s) && t <= if s < 0.2 * len { 5.0 } else { 14.0 } {
+                    img.set(x, y, 190);
+                }
+            }
+        }
+        img
+    };
+    let (bl, br) = (scene(1), scene(2));
+    let (fl, fr) = (with_arm(&bl, [300.0, 300.0], [520.0, 60.0]), with_arm(&br, [280.0, 310.0], [80.0, 80.0]));
+    let mut tracker = PointingTracker::new(p, GestureConfig::default());
+    tracker.set_background(&bl.view(), &br.view());
+    for _ in 0..12 {
+        tracker.update(&fl.view(), &fr.view());
+    }
+    c.bench_function("pointing: gesture update, 640x480 pair (arm held still)", |b| b.iter(|| black_box(tracker.update(&fl.view(), &fr.view()))));
 }
 
 fn grasp(c: &mut Criterion) {

@@ -114,5 +114,8 @@ pub struct SimReport {
     pub target_graspability: Graspability,
     /// What the simulator saw of the daemon.
     pub daemon: DaemonWatch,
+    /// The operator's pointing gesture and where it really aimed (`[pointer]` scenarios).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pointer: Option<crate::pointer::PointerTruth>,
 }
 

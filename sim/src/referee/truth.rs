@@ -12,6 +12,7 @@
 use glam::{DAffine3, DVec3};
 use serde::Serialize;
 
+use crate::pointer::PointerTruth;
 use crate::render::camera::{Camera, CameraInfo, signed_area_px2};
 use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
 use crate::render::scene::{ID_PLATE, block_face_id, decode_block_face};
@@ -104,6 +105,9 @@ pub struct GroundTruth {
     pub faces: Vec<FaceTruth>,
     pub edges: Vec<EdgeTruth>,
     pub gripper: GripperTruth,
+    /// The operator's pointing gesture, if the scenario has one (`[pointer]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pointer: Option<PointerTruth>,
 }
 
 /// The calibration cage (`cage.json`).
@@ -220,6 +224,7 @@ impl GroundTruth {
             faces,
             edges,
             gripper,
+            pointer: sim.pointer.as_ref().map(|p| p.truth(cams, sim.now_ns())),
         }
     }
 }

@@ -50,8 +50,27 @@ impl Scene {
                 objects.push(SceneObject { mesh: m, attach: Attach::Occluder(ei) });
             }
         }
+        if let Some(p) = &scenario.pointer {
+            objects.push(SceneObject { mesh: pointer_mesh(p.shade as f32), attach: Attach::Pointer });
+        }
         Self { objects }
     }
+}
+
+/// The operator's forearm and pointing finger, in the hand's frame (origin at the fingertip,
+/// +x back along the finger towards the elbow, +y across the hand, +z its back): a finger,
+/// the hand and a sleeved forearm, all centred on the x axis, so the finger's axis is the
+/// axis of the whole silhouette. Skin of albedo `skin`; the sleeve is darker. Lit by the
+/// one shading model like everything else.
+pub fn pointer_mesh(skin: f32) -> Mesh {
+    let mut m = Mesh::default();
+    let sleeve = skin * 0.55;
+    // (from x, to x, half width y, half thickness z, albedo), metres.
+    let parts = [(0.0, 0.08, 0.009, 0.008, skin), (0.08, 0.17, 0.042, 0.016, skin), (0.17, 0.47, 0.036, 0.032, sleeve)];
+    for (x0, x1, hy, hz, a) in parts {
+        m.cuboid(DVec3::new((x0 + x1) / 2.0, 0.0, 0.0), DVec3::new((x1 - x0) / 2.0, hy, hz), [a; 6], [false; 6], ID_NONE);
+    }
+    m
 }
 
 /// Mesh of block `index` with its face shades and ids.

@@ -75,6 +75,8 @@ pub enum Attach {
     Body(rapier3d::prelude::RigidBodyHandle),
     /// Index into the scenario's events (an occluder).
     Occluder(usize),
+    /// The operator's pointing hand (`[pointer]`), posed by its gesture.
+    Pointer,
 }
 
 /// One drawable object.

@@ -11,6 +11,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use super::pointer_config::PointerConfig;
+
 /// The kinds of block a scenario may place.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -74,6 +76,9 @@ pub struct Scenario {
     /// The ranges `--randomize` draws a whole work cell from (see [`RandomizeConfig`]);
     /// without the section, the default ranges.
     pub randomize: Option<RandomizeConfig>,
+    /// An operator's hand that points at what `[task]` names (see [`PointerConfig`]);
+    /// without the section, nobody points.
+    pub pointer: Option<PointerConfig>,
 }
 
 /// `[physics]`

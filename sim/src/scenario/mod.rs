@@ -20,11 +20,12 @@ mod error;
 mod layout;
 mod load;
 mod locate;
+mod pointer_config;
 mod shades;
 mod validate;
 
 pub use config::{
-    ArmConfig, BlockConfig, BlockKind, Cage, CameraConfig, Event, LightConfig, PhysicsConfig, RandomizeConfig, RenderConfig, Scenario, SuccessRule,
+    ArmConfig, BlockConfig, BlockKind, Cage, CameraConfig, Event, LightConfig, PhysicsConfig, PointerConfig, RandomizeConfig, RenderConfig, Scenario, SuccessRule,
     TableConfig, Task, s_to_ns,
 };
 pub use cell_draw::CellDrawError;

@@ -164,6 +164,10 @@ impl Scenario {
             r.check().map_err(|(f, m)| (p(&[K("randomize"), K(f)]), m))?;
         }
 
+        if let Some(pt) = &self.pointer {
+            pt.check().map_err(|(f, m)| (p(&[K("pointer"), K(f)]), m))?;
+        }
+
         for (i, e) in self.events.iter().enumerate() {
             let at = |f: &'static str| p(&[K("events"), I(i), K(f)]);
             if !finite_in(e.at_s(), 0.0, 3600.0) {

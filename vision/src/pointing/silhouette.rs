@@ -1,0 +1,412 @@
+//! The pointing arm in one view: what changed against the scene before it came (image
+//! differencing, as for the gripper), and the axis of that silhouette with its tip end.
+//!
+//! The finger, the hand and the forearm share one axis, so the midline of the silhouette is
+//! the image of the finger's line. The midline is measured across the silhouette (the middle
+//! of each cross-section perpendicular to its principal direction) rather than taken as the
+//! principal axis, so a wide hand on a narrow finger, or a forearm cut by the image border,
+//! does not tilt it; cross-sections that touch the border, or whose middle lies far off the
+//! line (a hole where the arm passes over something of its own grey), are left out of the
+//! final fit.
+//!
+//! Nothing is allocated per frame once the buffers have grown to the image size.
+
+use super::geometry::ImageLine;
+use crate::image::ImageView;
+
+/// Tuning of the silhouette and its axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SilhouetteConfig {
+    /// A pixel belongs to the arm when it differs from the background by more than this,
+    /// grey levels (sensor noise is a few).
+    pub min_difference: u8,
+    /// ... and at least this many of its 8 neighbours do too (drops isolated noise).
+    pub min_neighbours: u8,
+    /// Fewer changed pixels than this: no arm in view.
+    pub min_pixels: usize,
+    /// The silhouette must be at least this many times longer than wide to have an axis.
+    pub min_elongation: f64,
+    /// A cross-section's end on a background edge stronger than this (grey levels across
+    /// 4 px) may be where something in front hides the arm: the section is left out.
+    pub occluder_edge: u8,
+    /// A cross-section counts only if the sections within 3 px of it along the arm have its
+    /// width within this, pixels (away from the steps between finger, hand and forearm).
+    pub max_width_step_px: f64,
+}
+
+impl Default for SilhouetteConfig {
+    fn default() -> Self {
+        Self { min_difference: 18, min_neighbours: 4, min_pixels: 300, min_elongation: 1.5, occluder_edge: 20, max_width_step_px: 1.5 }
+    }
+}
+
+/// The arm's axis in one view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArmAxis {
+    /// The axis line (the finger's line), pixels.
+    pub line: ImageLine,
+    /// The fingertip: the narrow end, on the line, pixels.
+    pub tip_px: [f64; 2],
+    /// The other end of the measured part (the forearm, or where the border cuts it).
+    pub tail_px: [f64; 2],
+    /// Where the fitted midline passes closest to the cross-sections' centroid, pixels.
+    pub centre_px: [f64; 2],
+    /// Centroid of the changed pixels (how the whole arm moves), pixels.
+    pub centroid_px: [f64; 2],
+    /// Changed pixels in the silhouette.
+    pub pixels: usize,
+    /// Cross-sections used in the final fit.
+    pub sections: usize,
+    /// Standard error of the line's angle (rad) and of its offset at `centre_px` (px).
+    pub angle_sigma_rad: f64,
+    pub offset_sigma_px: f64,
+}
+
+/// Why no axis was found in a view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SilhouetteError {
+    #[error("nothing changed against the background ({pixels} pixels)")]
+    NothingThere { pixels: usize },
+    #[error("the background and the frame differ in size")]
+    SizeMismatch,
+    #[error("the changed region is not elongated like an arm")]
+    NotElongated,
+    #[error("too few clean cross-sections across the arm ({sections})")]
+    TooFewSections { sections: usize },
+}
+
+/// Reusable buffers for finding the arm's axis in one view.
+#[derive(Debug, Clone, Default)]
+pub struct SilhouetteFinder {
+    pub config: SilhouetteConfig,
+    changed: Vec<u8>,
+    pixels: Vec<(u16, u16)>,
+    /// Per cross-section (1 px bins along the principal direction): min t, max t, touches the
+    /// border.
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+    border: Vec<bool>,
+    mids: Vec<[f64; 3]>,
+    keep: Vec<bool>,
+    /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
+    tip_at_start: bool,
+}
+
+/// Sections on each side of a section that must have its width for it to count, 1 px each.
+const STEP_REACH: usize = 3;
+/// The finger alone gives the line when this many of its sections are clean.
+const MIN_FINGER_SECTIONS: usize = 15;
+
+impl SilhouetteFinder {
+    pub fn new(config: SilhouetteConfig) -> Self {
+        Self { config, ..Self::default() }
+    }
+
+    /// Pixels that changed between `background` and `frame` in the last call to
+    /// [`Self::find`] (after the neighbour test).
+    pub fn changed_pixels(&self) -> usize {
+        self.pixels.len()
+    }
+
+    /// The arm's axis in `frame`, against `background` (the same view before the arm came).
+    pub fn find(&mut self, background: &ImageView, frame: &ImageView) -> Result<ArmAxis, SilhouetteError> {
+        let (w, h) = (frame.width(), frame.height());
+        if background.width() != w || background.height() != h {
+            return Err(SilhouetteError::SizeMismatch);
+        }
+        self.difference(background, frame);
+        let n = self.pixels.len();
+        if n < self.config.min_pixels {
+            return Err(SilhouetteError::NothingThere { pixels: n });
+        }
+        // Principal direction of the changed pixels.
+        let (mut sx, mut sy) = (0.0, 0.0);
+        for &(x, y) in &self.pixels {
+            sx += f64::from(x);
+            sy += f64::from(y);
+        }
+        let (cx, cy) = (sx / n as f64, sy / n as f64);
+        let (mut cxx, mut cxy, mut cyy) = (0.0, 0.0, 0.0);
+        for &(x, y) in &self.pixels {
+            let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
+            cxx += dx * dx;
+            cxy += dx * dy;
+            cyy += dy * dy;
+        }
+        let half_diff = 0.5 * (cxx - cyy);
+        let root = (half_diff * half_diff + cxy * cxy).sqrt();
+        let (l1, l2) = (0.5 * (cxx + cyy) + root, 0.5 * (cxx + cyy) - root);
+        if l2 <= 0.0 || (l1 / l2).sqrt() < self.config.min_elongation {
+            return Err(SilhouetteError::NotElongated);
+        }
+        let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+        // Sections across the principal direction first, then again across the line that
+        // fit found (a short, cut-off silhouette's principal direction can be well off).
+        let (mut c, mut e) = ([cx, cy], [theta.cos(), theta.sin()]);
+        let mut fit = self.fit_sections(background, c, e)?;
+        for _ in 0..2 {
+            let n = [-e[1], e[0]];
+            let centre = [c[0] + fit.s_mean * e[0] + fit.at(fit.s_mean) * n[0], c[1] + fit.s_mean * e[1] + fit.at(fit.s_mean) * n[1]];
+            let d = [e[0] + fit.b * n[0], e[1] + fit.b * n[1]];
+            let norm = d[0].hypot(d[1]);
+            (c, e) = (centre, [d[0] / norm, d[1] / norm]);
+            fit = self.fit_sections(background, c, e)?;
+        }
+        let ([cx, cy], [ex, ey]) = (c, e);
+        let (nx, ny) = (-ey, ex);
+        // Back to image coordinates: the point at s = mean s, and the direction.
+        let to_image = |s: f64, t: f64| [cx + s * ex + t * nx, cy + s * ey + t * ny];
+        let centre_px = to_image(fit.s_mean, fit.at(fit.s_mean));
+        let dir = [ex + fit.b * nx, ey + fit.b * ny];
+        let line = ImageLine::along(&centre_px, &dir).map_err(|_| SilhouetteError::NotElongated)?;
+        // The tip: the narrower end (a finger against a hand and a forearm).
+        let tip_at_start = self.tip_at_start;
+        // The tip lies at the silhouette's last section at that end (the measured sections
+        // stop short of it, at the fingertip's end face).
+        let offset = self.lo.len() as f64 / 2.0;
+        let filled = |i: &usize| self.lo[*i].is_finite();
+        let (first, last) = ((0..self.lo.len()).find(filled), (0..self.lo.len()).rev().find(filled));
+        let (s_tip, s_tail) = match (tip_at_start, first, last) {
+            (true, Some(i), _) => (i as f64 - offset, fit.s_max),
+            (false, _, Some(i)) => (i as f64 - offset, fit.s_min),
+            (true, None, _) => (fit.s_min, fit.s_max),
+            (false, _, None) => (fit.s_max, fit.s_min),
+        };
+        Ok(ArmAxis {
+            line,
+            tip_px: to_image(s_tip, fit.at(s_tip)),
+            tail_px: to_image(s_tail, fit.at(s_tail)),
+            centre_px,
+            centroid_px: [sx / n as f64, sy / n as f64],
+            pixels: n,
+            sections: fit.count,
+            angle_sigma_rad: fit.b_sigma,
+            offset_sigma_px: fit.a_sigma,
+        })
+    }
+
+    /// Cross-sections of the silhouette perpendicular to direction `e` (unit) through `c`,
+    /// the clean ones' middles in `mids` (s along `e`, t across, width), and the robust line
+    /// `t(s)` through them.
+    fn fit_sections(&mut self, background: &ImageView, c: [f64; 2], e: [f64; 2]) -> Result<LineFit, SilhouetteError> {
+        let (w, h) = (background.width(), background.height());
+        let ([cx, cy], [ex, ey]) = (c, e);
+        let (nx, ny) = (-ey, ex);
+
+        // Cross-sections: extent across the principal direction per 1 px of length.
+        let span = (w as f64).hypot(h as f64).ceil() as usize + 2;
+        let offset = span as f64 / 2.0;
+        self.lo.clear();
+        self.lo.resize(span, f32::INFINITY);
+        self.hi.clear();
+        self.hi.resize(span, f32::NEG_INFINITY);
+        self.border.clear();
+        self.border.resize(span, false);
+        for &(x, y) in &self.pixels {
+            let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
+            let s = ((dx * ex + dy * ey) + offset).round() as usize;
+            let t = (dx * nx + dy * ny) as f32;
+            if s < span {
+                self.lo[s] = self.lo[s].min(t);
+                self.hi[s] = self.hi[s].max(t);
+                if x <= 1 || y <= 1 || usize::from(x) + 2 >= w || usize::from(y) + 2 >= h {
+                    self.border[s] = true;
+                }
+            }
+        }
+        // The midpoints (s, middle t, width) of clean sections.
+        self.mids.clear();
+        for s in 0..span {
+            // A section next to one touching the border may be cut too.
+            let near_border = self.border[s.saturating_sub(2)..(s + 3).min(span)].iter().any(|&b| b);
+            if self.lo[s].is_finite() && !near_border {
+                let (lo, hi) = (f64::from(self.lo[s]), f64::from(self.hi[s]));
+                // An end of the section on an edge of the scene before the arm came: something
+                // in front of the arm may hide it there (the robot), so its middle is not the
+                // arm's.
+                let along = s as f64 - offset;
+                let on_scene_edge = |t: f64, out: f64| {
+                    let at = |t: f64| sample(background, cx + along * ex + t * nx, cy + along * ey + t * ny);
+                    match (at(t + out * 2.5), at(t - out * 1.5)) {
+                        (Some(a), Some(b)) => (a - b).abs() > f64::from(self.config.occluder_edge),
+                        _ => true,
+                    }
+                };
+                if on_scene_edge(lo, -1.0) || on_scene_edge(hi, 1.0) {
+                    continue;
+                }
+                self.mids.push([along, 0.5 * (lo + hi), hi - lo + 1.0]);
+            }
+        }
+        // Keep sections inside a part of even width (finger, hand, forearm): where the width
+        // steps (the knuckles, the wrist, the fingertip's end face), the silhouette's edges are
+        // the images of end faces seen at a slant, and their middle is off the axis.
+        let k = STEP_REACH;
+        self.keep.clear();
+        for i in 0..self.mids.len() {
+            let ok = i >= k
+                && i + k < self.mids.len()
+                && self.mids[i + k][0] - self.mids[i - k][0] <= 2.0 * k as f64 + 0.5
+                && (i - k..=i + k).all(|j| (self.mids[j][2] - self.mids[i][2]).abs() <= self.config.max_width_step_px);
+            self.keep.push(ok);
+        }
+        let mut n_keep = 0;
+        for i in 0..self.mids.len() {
+            if self.keep[i] {
+                self.mids[n_keep] = self.mids[i];
+                n_keep += 1;
+            }
+        }
+        self.mids.truncate(n_keep);
+        if self.mids.len() < 10 {
+            return Err(SilhouetteError::TooFewSections { sections: self.mids.len() });
+        }
+        // The whole arm's midline, and the finger's alone: the finger's when they disagree
+        // (a hand or forearm seen at a slant, cut by the border or partly hidden, has a
+        // middle off the axis), the whole arm's (longer, so surer) when they agree.
+        let all = robust_fit(&self.mids);
+        let fit = match self.finger_sections() {
+            Some(range) => {
+                let finger = robust_fit(&self.mids[range]);
+                let turn = (all.b - finger.b).abs();
+                let shift = (all.at(finger.s_mean) - finger.a).abs();
+                if turn <= 3.0 * finger.b_sigma + 2e-3 && shift <= 3.0 * finger.a_sigma + 0.5 { all } else { finger }
+            }
+            None => all,
+        };
+        if fit.count < 10 {
+            return Err(SilhouetteError::TooFewSections { sections: fit.count });
+        }
+        Ok(fit)
+    }
+
+    /// The finger's sections (a range of `mids`): the run of narrow sections at the narrow
+    /// end, when there are enough of them. Also decides which end is the tip. The finger is
+    /// the part that points, and the part least often cut by the image border or hidden
+    /// behind the robot.
+    fn finger_sections(&mut self) -> Option<std::ops::Range<usize>> {
+        let n = self.mids.len();
+        let end_width = |it: &mut dyn Iterator<Item = &[f64; 3]>| {
+            let (sum, count) = it.take(5).fold((0.0f64, 0.0f64), |(s, c), m| (s + m[2], c + 1.0));
+            sum / count.max(1.0)
+        };
+        let (first, last) = (end_width(&mut self.mids.iter()), end_width(&mut self.mids.iter().rev()));
+        self.tip_at_start = first <= last;
+        let limit = first.min(last) * 1.5 + 2.0;
+        let run = |order: &mut dyn Iterator<Item = &[f64; 3]>| {
+            let mut count = 0;
+            let mut prev: Option<f64> = None;
+            for m in order {
+                if m[2] > limit || prev.is_some_and(|p| (m[0] - p).abs() > 8.0) {
+                    break;
+                }
+                prev = Some(m[0]);
+                count += 1;
+            }
+            count
+        };
+        let count = if self.tip_at_start { run(&mut self.mids.iter()) } else { run(&mut self.mids.iter().rev()) };
+        (count >= MIN_FINGER_SECTIONS && count < n).then(|| if self.tip_at_start { 0..count } else { n - count..n })
+    }
+
+    /// Fills `pixels` with the changed pixels that have enough changed neighbours.
+    fn difference(&mut self, background: &ImageView, frame: &ImageView) {
+        let (w, h) = (frame.width(), frame.height());
+        self.changed.clear();
+        self.changed.resize(w * h, 0);
+        let t = self.config.min_difference;
+        for y in 0..h {
+            let (a, b) = (background.row(y), frame.row(y));
+            let out = &mut self.changed[y * w..(y + 1) * w];
+            for x in 0..w {
+                out[x] = u8::from(a[x].abs_diff(b[x]) > t);
+            }
+        }
+        self.pixels.clear();
+        let need = self.config.min_neighbours;
+        for y in 1..h.saturating_sub(1) {
+            for x in 1..w.saturating_sub(1) {
+                if self.changed[y * w + x] == 0 {
+                    continue;
+                }
+                let row = |yy: usize| &self.changed[yy * w + x - 1..yy * w + x + 2];
+                let around: u8 = row(y - 1).iter().sum::<u8>() + row(y + 1).iter().sum::<u8>() + self.changed[y * w + x - 1] + self.changed[y * w + x + 1];
+                if around >= need {
+                    self.pixels.push((x as u16, y as u16));
+                }
+            }
+        }
+    }
+}
+
+/// `t = a + b (s - s_mean)` fitted to the selected midpoints, with its standard errors.
+#[derive(Debug, Clone, Copy)]
+struct LineFit {
+    a: f64,
+    b: f64,
+    s_mean: f64,
+    s_min: f64,
+    s_max: f64,
+    count: usize,
+    a_sigma: f64,
+    b_sigma: f64,
+}
+
+impl LineFit {
+    fn at(&self, s: f64) -> f64 {
+        self.a + self.b * (s - self.s_mean)
+    }
+}
+
+/// Least squares, then again three times without the sections more than 3 mean deviations
+/// (at least 1 px) off the line.
+fn robust_fit(mids: &[[f64; 3]]) -> LineFit {
+    let mut fit = fit_line(mids, |_| true);
+    for _ in 0..3 {
+        let dev = mids.iter().map(|m| (m[1] - fit.at(m[0])).abs()).sum::<f64>() / mids.len().max(1) as f64;
+        let limit = (3.0 * 1.25 * dev).max(1.0);
+        fit = fit_line(mids, |m| (m[1] - fit.at(m[0])).abs() <= limit);
+    }
+    fit
+}
+
+fn fit_line(mids: &[[f64; 3]], keep: impl Fn(&[f64; 3]) -> bool) -> LineFit {
+    let (mut n, mut ss, mut st) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut s_min, mut s_max) = (f64::INFINITY, f64::NEG_INFINITY);
+    for m in mids.iter().filter(|m| keep(m)) {
+        n += 1.0;
+        ss += m[0];
+        st += m[1];
+        s_min = s_min.min(m[0]);
+        s_max = s_max.max(m[0]);
+    }
+    let (s_mean, t_mean) = (ss / n.max(1.0), st / n.max(1.0));
+    let (mut sss, mut sst) = (0.0, 0.0);
+    for m in mids.iter().filter(|m| keep(m)) {
+        sss += (m[0] - s_mean).powi(2);
+        sst += (m[0] - s_mean) * (m[1] - t_mean);
+    }
+    let b = if sss > 0.0 { sst / sss } else { 0.0 };
+    let mut rss = 0.0;
+    for m in mids.iter().filter(|m| keep(m)) {
+        rss += (m[1] - t_mean - b * (m[0] - s_mean)).powi(2);
+    }
+    // Neighbouring sections share pixels' noise: count them as half as many independent ones.
+    let sigma = (rss / (n - 2.0).max(1.0)).sqrt() * std::f64::consts::SQRT_2;
+    LineFit {
+        a: t_mean,
+        b,
+        s_mean,
+        s_min,
+        s_max,
+        count: n as usize,
+        a_sigma: sigma / n.max(1.0).sqrt(),
+        b_sigma: sigma / sss.max(1e-9).sqrt(),
+    }
+}
+
+/// The grey at the nearest pixel to `(x, y)`, if inside the image.
+fn sample(img: &ImageView, x: f64, y: f64) -> Option<f64> {
+    let (xi, yi) = (x.round(), y.round());
+    (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width() && (yi as usize) < img.height()).then(|| f64::from(img.get(xi as usize, yi as usize)))
+}
