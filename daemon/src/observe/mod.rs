@@ -264,11 +264,15 @@ impl ObserveLoop {
     }
 
     /// No frame came (none yet, or the camera went away): the telemetry saying `reason` (no
-    /// frame, no tracker updated). `gone_now`: the camera just went away: counted, and the
-    /// clock takes the next frame as a new stream. The trackers keep their last state.
-    pub fn no_frame(&mut self, reason: &str, gone_now: bool) -> Telemetry {
+    /// frame, no tracker updated). `gone_now`: the camera just went away: counted.
+    /// `publisher_left`: its publisher is gone, so the clock takes the next frame as a new
+    /// stream; a publisher that only went quiet (a stall) keeps its numbering, and the ids it
+    /// skipped meanwhile are dropped frames. The trackers keep their last state.
+    pub fn no_frame(&mut self, reason: &str, gone_now: bool, publisher_left: bool) -> Telemetry {
         if gone_now {
             self.camera_gone += 1;
+        }
+        if publisher_left {
             self.clock.restart();
         }
         let t = &mut self.telemetry;
@@ -410,5 +414,23 @@ mod tests {
         assert_eq!(last.tracker_state[2..], [1, 1]);
         assert!(last.reason_text().contains("views disagree"), "{}", last.reason_text());
         assert!(ol.report(1.0, "x").epipolar.unwrap().over_limit_frames > 0);
+    }
+
+    #[test]
+    fn a_stalled_camera_keeps_its_numbering_and_a_new_publisher_starts_a_new_stream() {
+        let (left, right) = (view(120, 140), view(100, 140));
+        let (mut ol, _) = run(&left, &right, 0.0);
+        let period_ns = 33_333_333;
+        // The camera stalls (no frame for the stale time; its publisher still there), then
+        // frame 33 arrives: frames 30-32 were dropped, not a new stream.
+        ol.no_frame("camera gone: no frame for 100 ms", true, false);
+        ol.cycle(33, 1_000 + 33 * period_ns, &left.view(), &right.view());
+        assert_eq!(ol.finish_cycle(1).dropped_frames, 3);
+        // Its publisher left; a new one numbers from 40: a new stream, nothing dropped.
+        ol.no_frame("camera gone: its publisher went away", true, true);
+        ol.cycle(40, 5_000_000_000, &left.view(), &right.view());
+        assert_eq!(ol.finish_cycle(1).dropped_frames, 3);
+        let r = ol.report(1.0, "x");
+        assert_eq!((r.camera_gone, r.camera.dropped_frames, r.camera.stream_restarts), (2, 3, 1));
     }
 }

@@ -96,7 +96,7 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
             StereoEvent::Timeout | StereoEvent::PublisherGone => {
                 if !got_frame {
                     // Before the first frame: say what it waits for, every stale period.
-                    telemetry.send(&ol.no_frame("waiting for the camera's first frame", false))?;
+                    telemetry.send(&ol.no_frame("waiting for the camera's first frame", false, false))?;
                     continue;
                 }
                 let first = gone_since.is_none();
@@ -109,7 +109,7 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
                     };
                     tracing::warn!(reason = %gone_reason, "still running, waiting for the camera to come back");
                 }
-                telemetry.send(&ol.no_frame(&gone_reason, first))?;
+                telemetry.send(&ol.no_frame(&gone_reason, first, matches!(event, StereoEvent::PublisherGone)))?;
                 if let Some(limit) = options.end_after_gone
                     && since.elapsed() >= limit
                 {
