@@ -385,6 +385,7 @@ impl HardLoop {
                 loop_us_mean: t.mean_ns() / 1000.0,
                 deadline_us: t.deadline_ns() / 1000,
                 deadline_misses: t.deadline_misses(),
+                stale_frame_commands: 0, // counted by the service loop, which sees the stream
                 cycles: t.count(),
                 robot_states: self.robot_states(),
                 tracker_update: TrackerTiming {

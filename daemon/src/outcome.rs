@@ -50,6 +50,9 @@ pub struct LoopTiming {
     pub loop_us_mean: f64,
     pub deadline_us: u64,
     pub deadline_misses: u64,
+    /// Commands stamped with a frame older than the newest the daemon had received (the
+    /// service loop counts them; 0 unless something answers from a backlog).
+    pub stale_frame_commands: u64,
     pub cycles: u64,
     pub robot_states: u64,
     /// The trackers' own update time: `"tracker_update": {...}` in `daemon.json`.
@@ -115,6 +118,7 @@ mod tests {
                 loop_us_mean: 45.0,
                 deadline_us: 5000,
                 deadline_misses: 0,
+                stale_frame_commands: 0,
                 cycles: 900,
                 robot_states: 1800,
                 tracker_update: TrackerTiming { us_p50: 60.0, us_p99: 85.0, us_max: 140.0, us_mean: 62.0, cycles: 880 },
@@ -142,7 +146,7 @@ mod tests {
         let keys: Vec<&str> = value.as_object().unwrap().keys().map(String::as_str).collect();
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
-            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "camera", "calibration",
+            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
             "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
             "servo_trace", "wall_s",
         ];
