@@ -385,7 +385,6 @@ impl HardLoop {
                 loop_us_mean: t.mean_ns() / 1000.0,
                 deadline_us: t.deadline_ns() / 1000,
                 deadline_misses: t.deadline_misses(),
-                stale_frame_commands: 0, // counted by the service loop, which sees the stream
                 cycles: t.count(),
                 robot_states: self.robot_states(),
                 tracker_update: TrackerTiming {
@@ -408,6 +407,7 @@ impl HardLoop {
                 recoveries: self.recoveries(),
             },
             servo_trace: m.servo.trace().to_vec(),
+            stale_frame_commands: 0, // counted by the service loop, which sees the stream
             wall_s,
         }
     }

@@ -20,6 +20,10 @@ pub struct DaemonOutcome {
     #[serde(flatten)]
     pub task: TaskRecord,
     pub servo_trace: Vec<ServoTraceRow>,
+    /// Commands stamped with a frame older than the newest the daemon had received (the
+    /// service loop counts them, as it alone sees the stream; 0 unless something answers
+    /// from a backlog).
+    pub stale_frame_commands: u64,
     pub wall_s: f64,
 }
 
@@ -50,9 +54,6 @@ pub struct LoopTiming {
     pub loop_us_mean: f64,
     pub deadline_us: u64,
     pub deadline_misses: u64,
-    /// Commands stamped with a frame older than the newest the daemon had received (the
-    /// service loop counts them; 0 unless something answers from a backlog).
-    pub stale_frame_commands: u64,
     pub cycles: u64,
     pub robot_states: u64,
     /// The trackers' own update time: `"tracker_update": {...}` in `daemon.json`.
@@ -118,7 +119,6 @@ mod tests {
                 loop_us_mean: 45.0,
                 deadline_us: 5000,
                 deadline_misses: 0,
-                stale_frame_commands: 0,
                 cycles: 900,
                 robot_states: 1800,
                 tracker_update: TrackerTiming { us_p50: 60.0, us_p99: 85.0, us_max: 140.0, us_mean: 62.0, cycles: 880 },
@@ -135,6 +135,7 @@ mod tests {
                 recoveries: 0,
             },
             servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
+            stale_frame_commands: 0,
             wall_s: 31.5,
         }
     }

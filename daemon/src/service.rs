@@ -171,7 +171,7 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
         let _ = send(&mut commands, &mut telemetry, &cmd, &t);
     }
     let mut outcome = hl.outcome(start.elapsed().as_secs_f64());
-    outcome.timing.stale_frame_commands = stale_frame_commands;
+    outcome.stale_frame_commands = stale_frame_commands;
     let (report_files, report_errors) = match report {
         Some(mut rep) => {
             // The fitted camera model, for `handeye daemon --observe --stereo-model`.
