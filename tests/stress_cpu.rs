@@ -11,8 +11,10 @@
 //! are counted and reported, not bounded: a loaded machine is allowed to be late, not to
 //! act on old frames or to stop silently.
 //!
-//! `make stress` runs both (idle first, then loaded) and prints the tables BENCHMARKS.md
-//! keeps ("CPU stress"). HANDEYE_STRESS_SEEDS=N runs seeds 1..=N; HANDEYE_BIN names the
+//! `make stress` runs both (idle first, then loaded; libtest runs them in name order) and
+//! prints the table BENCHMARKS.md keeps ("CPU stress"). There is no short case in `make
+//! test`: one loaded closed-loop run takes about 25 s and would load every core under the
+//! rest of the suite, whose own timing guards (stale frames, liveness) it would then test. HANDEYE_STRESS_SEEDS=N runs seeds 1..=N; HANDEYE_BIN names the
 //! `handeye` binary to run (`make stress` gives the release build, as `handeye run` users
 //! have it; the default is the test build's).
 
