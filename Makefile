@@ -57,6 +57,22 @@ fuzz:
 	    $(CARGO) test --test fuzz_wire --test fuzz_config --test fuzz_png --test fuzz_recording --test fuzz_geometry -- --ignored --nocapture --test-threads 1
 	@echo "make fuzz: per-decoder counts and times in target/fuzz-report.jsonl"
 
+# CPU stress (issue 21): pick_cube for 10 seeds on the machine as it is, then with every core
+# loaded by stress-ng; each run must lift or stop with a reason, answer no stale frame and
+# leave no shared memory. Prints the table BENCHMARKS.md keeps ("CPU stress"); the release
+# build is what runs. HANDEYE_STRESS_SEEDS=N changes the seed count.
+.PHONY: stress soak
+stress: build
+	@xdg=$${XDG_RUNTIME_DIR:-$$(mktemp -d)}; \
+	XDG_RUNTIME_DIR=$$xdg HANDEYE_BIN=$(CURDIR)/target/release/handeye $(CARGO) test --test stress_cpu -- --ignored --nocapture --test-threads 1
+
+# Soak (issue 21): one observe-mode daemon while 200 cameras (feeders of visp-cube) come and
+# go; daemon memory flat after the first 10, shared-memory files back to baseline after each,
+# no descriptor leak. Prints the table BENCHMARKS.md keeps ("Soak"); about 10 minutes.
+# HANDEYE_SOAK_SESSIONS=N changes the count.
+soak: build
+	HANDEYE_BIN=$(CURDIR)/target/release/handeye $(CARGO) test --test soak_observe two_hundred -- --ignored --nocapture
+
 # Installs, builds, runs the headline job and says where its output is.
 demo: build
 	BIN=target/release/handeye bash scripts/demo.sh

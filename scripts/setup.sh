@@ -16,6 +16,7 @@
 #   gstreamer1.0-libav                avdec_h264: decoding H.264 files and cameras.
 #   util-linux                        setpriv: tests/permissions.rs runs an intruder as `nobody`
 #                                     (Essential in Debian, so only a stripped image lacks it).
+#   stress-ng                         `make stress` loads every core while the closed loop runs.
 #
 # iceoryx2 needs nothing but a writable /dev/shm (and /tmp); rapier, nalgebra and glam need
 # nothing.
@@ -32,6 +33,7 @@ $loader || need+=(libvulkan1)
 $have_icd || need+=(mesa-vulkan-drivers)
 command -v cc >/dev/null 2>&1 || need+=(gcc libc6-dev)
 command -v setpriv >/dev/null 2>&1 || need+=(util-linux)
+command -v stress-ng >/dev/null 2>&1 || need+=(stress-ng)
 # Debian packages by name: installed ones are skipped.
 have_deb() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'ok installed'; }
 for p in pkg-config libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev gstreamer1.0-plugins-base \

@@ -407,6 +407,7 @@ impl HardLoop {
                 recoveries: self.recoveries(),
             },
             servo_trace: m.servo.trace().to_vec(),
+            stale_frame_commands: 0, // counted by the service loop, which sees the stream
             wall_s,
         }
     }

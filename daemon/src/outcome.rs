@@ -20,6 +20,10 @@ pub struct DaemonOutcome {
     #[serde(flatten)]
     pub task: TaskRecord,
     pub servo_trace: Vec<ServoTraceRow>,
+    /// Commands stamped with a frame older than the newest the daemon had received (the
+    /// service loop counts them, as it alone sees the stream; 0 unless something answers
+    /// from a backlog).
+    pub stale_frame_commands: u64,
     pub wall_s: f64,
 }
 
@@ -131,6 +135,7 @@ mod tests {
                 recoveries: 0,
             },
             servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
+            stale_frame_commands: 0,
             wall_s: 31.5,
         }
     }
@@ -142,7 +147,7 @@ mod tests {
         let keys: Vec<&str> = value.as_object().unwrap().keys().map(String::as_str).collect();
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
-            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "camera", "calibration",
+            "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
             "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
             "servo_trace", "wall_s",
         ];

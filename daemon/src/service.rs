@@ -80,6 +80,11 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
     let mut hl = HardLoop::new(options.config, options.hint)?;
     hl.set_indicated_point(options.indicated_point_m);
     let mut got_frame = false;
+    // The newest frame id taken from the camera stream (a new publisher numbers from its own
+    // start, so it is forgotten when one comes up), and the commands stamped with an older
+    // one: a phase that answered with the frame a worker job saw would count here.
+    let mut newest_frame_id: Option<u64> = None;
+    let mut stale_frame_commands = 0u64;
     let send = |commands: &mut MessagePublisher<RobotCommand>, telemetry: &mut MessagePublisher<Telemetry>, cmd: &RobotCommand, t: &Telemetry| {
         telemetry.send(t)?;
         commands.send(cmd)?;
@@ -116,7 +121,9 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                         MessageEvent::Interrupted => break,
                     }
                 }
+                newest_frame_id = newest_frame_id.max(Some(frame.frame_id()));
                 let out = hl.cycle(frame.frame_id(), frame.header().capture_time_ns, &left, &right);
+                stale_frame_commands += u64::from(newest_frame_id.is_some_and(|n| out.command.frame_id < n));
                 let loop_ns = monotonic_ns().saturating_sub(receive_ns);
                 let t = *hl.finish_cycle(loop_ns);
                 send(&mut commands, &mut telemetry, &out.command, &t)?;
@@ -147,7 +154,7 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
                 stop_reason = camera("camera stream gone");
                 break;
             }
-            StereoEvent::PublisherUp => {}
+            StereoEvent::PublisherUp => newest_frame_id = None,
             StereoEvent::Interrupted => {
                 stop_reason = Some(Fault::new(FailureKind::Interrupted, "interrupted"));
                 break;
@@ -163,7 +170,8 @@ pub fn run(options: ServiceOptions) -> Result<ServiceResult, ServiceError> {
         // The robot may be gone too; a failed send changes nothing about the outcome.
         let _ = send(&mut commands, &mut telemetry, &cmd, &t);
     }
-    let outcome = hl.outcome(start.elapsed().as_secs_f64());
+    let mut outcome = hl.outcome(start.elapsed().as_secs_f64());
+    outcome.stale_frame_commands = stale_frame_commands;
     let (report_files, report_errors) = match report {
         Some(mut rep) => {
             // The fitted camera model, for `handeye daemon --observe --stereo-model`.
