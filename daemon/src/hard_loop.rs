@@ -11,7 +11,7 @@
 //! on entering a phase, and the failure text.
 
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{Role, StereoStates, View};
+use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
 use handeye_wire::hint::OperatorHint;
 use handeye_wire::report::{Failure, FailureKind};
 use handeye_wire::{
@@ -19,15 +19,15 @@ use handeye_wire::{
 };
 
 use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
-use crate::config::DaemonConfig;
+use crate::config::{DaemonConfig, SafetyConfig};
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
 use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::phase::PhaseState;
-use crate::recovery::{Recovery, RecoveryStep};
-use crate::safety::{check_robot, check_trackers};
+use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
+use crate::safety::{check_robot, check_trackers, needs_trackers};
 use crate::timing::LatencyHistogram;
 
 /// What one cycle produced: the command answering the frame, and what it asked the report
@@ -38,16 +38,27 @@ pub struct CycleOutput {
     pub reports: ReportRequests,
 }
 
-/// The view whose gripper and target trackers are both lost (or unsure) while the other
-/// view tracks both confidently.
-fn moved_view(states: &StereoStates, trackers: &handeye_vision::tracker::StereoTrackerSet, min_score: f64) -> Option<View> {
-    let ok = |r: Role, v: View| {
-        matches!(states.get(r, v), Some(s) if s.is_tracking()) && trackers.get(r, v).is_some_and(|t| t.confidence().score >= min_score)
-    };
-    [View::Left, View::Right].into_iter().find(|&v| {
-        let other = if v == View::Left { View::Right } else { View::Left };
-        !ok(Role::Gripper, v) && !ok(Role::Target, v) && ok(Role::Gripper, other) && ok(Role::Target, other)
-    })
+/// The trackers `phase` needs that are lost or below their confidence this cycle (active
+/// ones only), with what is wrong with each.
+fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, String)> {
+    let (gripper, target) = needs_trackers(phase);
+    let mut lost = Vec::new();
+    for (role, needed) in [(Role::Gripper, gripper), (Role::Target, target)] {
+        for view in View::ALL {
+            if !needed || !trackers.is_active(role, view) {
+                continue;
+            }
+            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
+            let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
+            match states.get(role, view) {
+                Some(TrackState::Lost(why)) => lost.push((role, view, why.to_string())),
+                None => lost.push((role, view, "did not run".to_string())),
+                Some(TrackState::Tracking) if score.is_nan() || score < min => lost.push((role, view, format!("confidence {score:.2} < {min}"))),
+                Some(TrackState::Tracking) => {}
+            }
+        }
+    }
+    lost
 }
 
 /// The daemon's state between frames.
@@ -74,10 +85,17 @@ pub struct HardLoop {
     failure: Option<Failure>,
     telemetry: Telemetry,
     stopped_at_frame: Option<u64>,
-    /// Re-acquiring one view after its camera moved (servo only).
+    /// Holding the arm while lost trackers are searched for.
     recovery: Option<Recovery>,
-    /// Camera knocks recovered from.
+    /// Losses recovered from, and the camera time the arm held for them, ns.
     recoveries: u32,
+    held_ns: u64,
+    /// Each tracker's last confident frame (by `recovery::slot_index`): where a search
+    /// for it starts.
+    last_good: [Option<LastGood>; 4],
+    /// Move commands a phase asked for while a tracker it needs was lost, turned into
+    /// holds where commands are stamped (a bug if ever non-zero; see `cycle`).
+    moves_refused: u64,
 }
 
 impl HardLoop {
@@ -103,6 +121,9 @@ impl HardLoop {
             stopped_at_frame: None,
             recovery: None,
             recoveries: 0,
+            held_ns: 0,
+            last_good: [None; 4],
+            moves_refused: 0,
         })
     }
 
@@ -153,7 +174,10 @@ impl HardLoop {
         }
         let (states, update_ns) = self.mission.trackers.update_timed(left, right, tick.dt_s, monotonic_ns);
         self.telemetry.tracker_update_ns = update_ns;
+        self.note_good_frames(&states, tick.now_ns);
+        let phase_before = self.phase.phase();
         let cmd = self.decide(frame_index, frame_id, tick, left, right, states);
+        let cmd = self.refuse_blind_moves(cmd, phase_before, &states);
         let phase = self.phase.phase();
         if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
             self.phase_reached = phase;
@@ -175,6 +199,44 @@ impl HardLoop {
         CycleOutput { command, reports: self.mission.reporting.take_requests() }
     }
 
+    /// Remembers each confidently tracking contour's frame: a later search starts there
+    /// rather than where a contour drifted to while it was being lost.
+    fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
+        let cfg = &self.mission.cfg.safety;
+        for role in [Role::Gripper, Role::Target] {
+            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
+            for view in View::ALL {
+                let Some(t) = self.mission.trackers.get(role, view) else { continue };
+                let score = t.confidence().score;
+                if matches!(states.get(role, view), Some(TrackState::Tracking)) && score >= min {
+                    self.last_good[slot_index(role, view)] = Some(LastGood { frame: t.frame(), time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
+                }
+            }
+        }
+    }
+
+    /// The one place every command passes before it is stamped: a move while a tracker the
+    /// phase that asked for it needs is lost, unsure, or being searched for never goes out
+    /// (it becomes a hold, and is counted and logged as the bug it would be).
+    fn refuse_blind_moves(&mut self, cmd: Cmd, phase: Phase, states: &StereoStates) -> Cmd {
+        if !cmd.is_move() {
+            return cmd;
+        }
+        let blind = if self.recovery.is_some() {
+            Err(Fault::new(FailureKind::TrackerLost, "holding for a lost tracker"))
+        } else {
+            check_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers)
+        };
+        match blind {
+            Ok(()) => cmd,
+            Err(why) => {
+                self.moves_refused += 1;
+                tracing::error!(phase = phase.name(), reason = %why, "a move was asked for on a lost track: holding instead");
+                Cmd::HOLD
+            }
+        }
+    }
+
     fn decide(&mut self, frame_index: u64, frame_id: u64, tick: FrameTick, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
         if self.phase.is_terminal() {
             return Cmd::HOLD;
@@ -192,42 +254,23 @@ impl HardLoop {
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
-        if let Some(rec) = self.recovery.as_mut() {
-            let other = if rec.view == View::Left { View::Right } else { View::Left };
-            let other_tracking = [Role::Gripper, Role::Target].iter().all(|&r| matches!(states.get(r, other), Some(s) if s.is_tracking()));
-            let image = if rec.view == View::Left { left } else { right };
-            match rec.step(&mut self.mission.trackers, image, other_tracking) {
-                RecoveryStep::Searching => return Cmd::HOLD,
-                RecoveryStep::Recovered { shift_px } => {
-                    tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
-                    self.recoveries += 1;
-                    self.mission.reporting.snapshot("reacquired");
-                    let view = rec.view;
-                    if let PhaseState::Servo(p) = &mut self.phase {
-                        p.resume(&mut self.mission, view, shift_px);
-                    }
-                    self.recovery = None;
-                    return Cmd::HOLD;
-                }
-                RecoveryStep::Failed(reason) => {
-                    self.recovery = None;
-                    let detail = format!("camera moved, trackers not re-acquired: {reason}");
-                    self.stop_reason(Phase::Stopped, Fault::new(FailureKind::Camera, detail));
-                    return Cmd::STOP;
-                }
-            }
+        if self.recovery.is_some() {
+            return self.hold_and_search(phase, &states, tick.now_ns, left, right);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
-            // Both trackers of one view lost while the other view holds both: that camera
-            // moved. Stop the arm and try to re-acquire (servo only; elsewhere, stop).
-            if phase == Phase::Servo
-                && let Some(view) = moved_view(&states, &self.mission.trackers, self.mission.cfg.safety.min_tracker_score)
-                && let Some(rec) = Recovery::start(&self.mission.trackers, view, frame_index)
-            {
-                tracing::warn!(?view, reason = %fault, "a camera seems to have moved: stopping and re-acquiring");
+            // A tracker the phase needs is lost: hold the arm and search for it (unless
+            // holding is switched off).
+            let lost = lost_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers);
+            let patience_s = self.mission.cfg.safety.loss_patience_s;
+            if patience_s > 0.0 && !lost.is_empty() {
+                let cfg = &self.mission.cfg.safety;
+                let min_scores = [cfg.min_tracker_score, cfg.min_target_score];
+                let rec = Recovery::start(&mut self.mission.trackers, &lost, &self.last_good, tick.now_ns, patience_s, min_scores);
+                let what = rec.what();
+                tracing::warn!(phase = phase.name(), %what, "tracker lost: holding the arm and searching");
+                self.mission.reporting.set_status(&format!("holding: {what}; searching"));
+                self.mission.reporting.snapshot("lost");
                 self.recovery = Some(rec);
-                self.mission.reporting.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
-                self.mission.reporting.snapshot("camera_moved");
                 return Cmd::STOP;
             }
             self.stop_reason(Phase::Stopped, fault);
@@ -238,6 +281,38 @@ impl HardLoop {
             Step::Stay(c) | Step::Next(c) => c,
             Step::Fail(fault) => {
                 self.stop_reason(Phase::Failed, fault);
+                Cmd::STOP
+            }
+        }
+    }
+
+    /// A cycle while holding for lost trackers: contours the phase needs that are lost now
+    /// join the search; the search runs; the phase resumes when all are back, the run stops
+    /// when the patience is spent.
+    fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
+        let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
+        for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
+            rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);
+        }
+        let epipolar = self.mission.calibration.get().map(|cal| EpipolarCheck {
+            constraint: cal.model.epipolar(),
+            tol_px: 2.0 * self.mission.cfg.target.max_epipolar_px,
+        });
+        match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
+            RecoveryStep::Searching => Cmd::HOLD,
+            RecoveryStep::Recovered { knock, held_s } => {
+                tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
+                let held_ns = now_ns.saturating_sub(rec.start_ns());
+                self.recovery = None;
+                self.recoveries += 1;
+                self.held_ns += held_ns;
+                self.mission.reporting.snapshot("reacquired");
+                self.phase.resume(&mut self.mission, held_ns, knock);
+                Cmd::HOLD
+            }
+            RecoveryStep::Failed(reason) => {
+                self.recovery = None;
+                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
                 Cmd::STOP
             }
         }
@@ -276,6 +351,7 @@ impl HardLoop {
                     t.tracker_state[i] = match states.get(role, view) {
                         Some(s) if s.is_tracking() => 1,
                         Some(_) => 2,
+                        None if self.recovery.as_ref().is_some_and(|r| r.is_searching(role, view)) => 2,
                         None if self.mission.trackers.is_active(role, view) => 1,
                         None => 0,
                     };
@@ -405,6 +481,8 @@ impl HardLoop {
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 stop_frame_id: self.stopped_at_frame(),
                 recoveries: self.recoveries(),
+                held_s: self.held_s(),
+                moves_refused: self.moves_refused(),
             },
             servo_trace: m.servo.trace().to_vec(),
             wall_s,
@@ -421,9 +499,19 @@ impl HardLoop {
         &self.mission
     }
 
-    /// Camera knocks the trackers recovered from.
+    /// Tracker losses recovered from (searched for and found again while the arm held).
     pub fn recoveries(&self) -> u32 {
         self.recoveries
+    }
+
+    /// Camera time the arm held for lost trackers, over the whole run, s.
+    pub fn held_s(&self) -> f64 {
+        self.held_ns as f64 * 1e-9
+    }
+
+    /// Moves refused because a tracker the phase needed was lost (see `refuse_blind_moves`).
+    pub fn moves_refused(&self) -> u64 {
+        self.moves_refused
     }
 
     /// The configuration the loop runs with.

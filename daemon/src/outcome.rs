@@ -89,8 +89,16 @@ pub struct TaskRecord {
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
-    /// Camera knocks the trackers recovered from.
+    /// Tracker losses recovered from: the arm held, the lost contours were found again and
+    /// the phase resumed (a knocked camera is one).
     pub recoveries: u32,
+    /// Camera time the arm held for lost trackers, over the run, s.
+    #[serde(default)]
+    pub held_s: f64,
+    /// Moves a phase asked for while a tracker it needed was lost, refused where commands
+    /// are stamped (0 unless the daemon has a bug: a lost track never moves the arm).
+    #[serde(default)]
+    pub moves_refused: u64,
 }
 
 #[cfg(test)]
@@ -129,6 +137,8 @@ mod tests {
                 grip_width_mm: None,
                 stop_frame_id: Some(u64::MAX),
                 recoveries: 0,
+                held_s: 0.0,
+                moves_refused: 0,
             },
             servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
             wall_s: 31.5,
@@ -143,7 +153,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

@@ -108,6 +108,19 @@ impl Calibrate {
         }
     }
 
+    /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count
+    /// against the phase; the move under way is sent again (the arm stopped short of it), and
+    /// a point being sampled is visited and sampled afresh (its samples may have included the
+    /// frames that lost the plate).
+    pub fn resume(&mut self, held_ns: u64) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        self.stage_ns = self.stage_ns.saturating_add(held_ns);
+        match &mut self.stage {
+            Stage::Moving { wait, .. } | Stage::Fitting { wait, .. } => *wait = None,
+            Stage::Sampling { i, .. } => self.stage = Stage::Moving { i: *i, wait: None },
+        }
+    }
+
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         // Scalars copied out so that `m` stays free to borrow mutably (no allocation).
         let cfg = CalibrationView::of(&m.cfg.calibration);

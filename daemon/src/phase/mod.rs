@@ -60,6 +60,19 @@ impl PhaseState {
         matches!(self, Self::Done { .. } | Self::Failed | Self::Stopped)
     }
 
+    /// Picks the phase up again after the arm held `held_ns` of camera time while lost
+    /// trackers were searched for ([`crate::recovery`]); `knock`: a camera moved, its view and
+    /// image shift.
+    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(handeye_vision::tracker::View, [f64; 2])>) {
+        match self {
+            Self::Calibrate(p) => p.resume(held_ns),
+            Self::Plan(p) => p.resume(held_ns),
+            Self::AcquireTarget(p) => p.resume(held_ns),
+            Self::Servo(p) => p.resume(m, held_ns, knock),
+            Self::AcquireGripper(_) | Self::Grasp(_) | Self::Lift(_) | Self::Done { .. } | Self::Failed | Self::Stopped => {}
+        }
+    }
+
     /// Runs the current phase for one cycle; on `Next` builds the following phase.
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let step = match self {

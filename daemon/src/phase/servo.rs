@@ -331,16 +331,33 @@ impl ServoPhase {
         }
     }
 
-    /// Picks up again after the arm was stopped for a re-acquisition: the pending move is
-    /// void (the arm stopped where it was), the servo starts afresh from a new look.
-    /// `shift_px` is how far the moved camera's image went: its affine model's offset moves
+    /// Picks up again after the arm held `held_ns` for a lost tracker: the time held does not
+    /// count, the pending move is void (the arm stopped where it was), the servo starts
+    /// afresh from a new look (its Broyden memory of the interrupted move is dropped).
+    /// `knock`: one camera moved, its image by `shift_px`: its affine model's offset moves
     /// with it (the first-order effect of a small knock). The goal, held in the facet's
     /// frame, needs nothing: it is turned into image terms from the re-acquired target.
     ///
-    /// A knock before the local model was fitted (during the approach or the local cage)
+    /// A loss before the local model was fitted (during the approach or the local cage)
     /// voids the cage's samples so far: the cage starts again from the approach pose and
-    /// fits the local model to the moved camera as it is now.
-    pub fn resume(&mut self, m: &mut Mission, view: View, shift_px: [f64; 2]) {
+    /// fits the local model to the cameras (and the target) as they are now.
+    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        m.reporting.set_status("servo: resumed after re-acquiring");
+        let Some((view, shift_px)) = knock else {
+            self.wait = None;
+            self.target_recent = TargetMean::default();
+            if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
+                self.local_robot_m.clear();
+                self.local_image_px.clear();
+                self.target_cage = TargetMean::default();
+                self.stage = Stage::Approach;
+            } else {
+                self.stage = Stage::Servo { converging: false };
+            }
+            self.servo.reset();
+            return;
+        };
         self.wait = None;
         self.target_recent = TargetMean::default();
         self.stage = if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
@@ -365,7 +382,6 @@ impl ServoPhase {
             Ok(servo) => self.servo = servo,
             Err(_) => self.servo.reset(),
         }
-        m.reporting.set_status("servo: resumed after re-acquiring");
     }
 
     /// At local cage point `i` (arrived and settled): sample, then move on; after the last,
