@@ -268,8 +268,14 @@ impl HardLoop {
                 let rec = Recovery::start(&mut self.mission.trackers, &lost, &self.last_good, tick.now_ns, patience_s, min_scores);
                 let what = rec.what();
                 tracing::warn!(phase = phase.name(), %what, "tracker lost: holding the arm and searching");
-                self.mission.reporting.set_status(&format!("holding: {what}; searching"));
-                self.mission.reporting.snapshot("lost");
+                // Both contours of one view at once: that camera has most likely moved.
+                let moved = View::ALL.into_iter().find(|&v| [Role::Gripper, Role::Target].iter().all(|&r| lost.iter().any(|l| l.0 == r && l.1 == v)));
+                match moved {
+                    Some(View::Left) => self.mission.reporting.set_status("left camera moved: holding, re-acquiring"),
+                    Some(View::Right) => self.mission.reporting.set_status("right camera moved: holding, re-acquiring"),
+                    None => self.mission.reporting.set_status(&format!("holding: {what}; searching")),
+                }
+                self.mission.reporting.snapshot(if moved.is_some() { "camera_moved" } else { "lost" });
                 self.recovery = Some(rec);
                 return Cmd::STOP;
             }
@@ -300,14 +306,14 @@ impl HardLoop {
         });
         match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
             RecoveryStep::Searching => Cmd::HOLD,
-            RecoveryStep::Recovered { knock, held_s } => {
+            RecoveryStep::Recovered { knock, held_s, shifts_px } => {
                 tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
                 let held_ns = now_ns.saturating_sub(rec.start_ns());
                 self.recovery = None;
                 self.recoveries += 1;
                 self.held_ns += held_ns;
                 self.mission.reporting.snapshot("reacquired");
-                self.phase.resume(&mut self.mission, held_ns, knock);
+                self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
                 Cmd::HOLD
             }
             RecoveryStep::Failed(reason) => {

@@ -91,7 +91,9 @@ pub enum RecoveryStep {
     Searching,
     /// Every lost contour is back and steady. `knock`: one view lost both contours and they
     /// came back shifted alike (a moved camera): that view and the shift, px.
-    Recovered { knock: Option<(View, [f64; 2])>, held_s: f64 },
+    /// `shifts_px`: each re-found contour's shift from its last good frame, by
+    /// [`slot_index`] (`None`: it was not lost): a target that came back elsewhere moved.
+    Recovered { knock: Option<(View, [f64; 2])>, held_s: f64, shifts_px: [Option<[f64; 2]>; 4] },
     Failed(RecoveryError),
 }
 
@@ -368,7 +370,11 @@ impl Recovery {
             let t = self.slots.iter().find(|s| s.role == Role::Target && s.view == v)?.found?;
             ((g - t).norm() < 1e-9 && g.norm() > 0.0).then_some((v, [g.x, g.y]))
         });
-        RecoveryStep::Recovered { knock, held_s: now_ns.saturating_sub(self.start_ns) as f64 * 1e-9 }
+        let mut shifts_px = [None; 4];
+        for s in &self.slots {
+            shifts_px[slot_index(s.role, s.view)] = s.found.map(|d| [d.x, d.y]);
+        }
+        RecoveryStep::Recovered { knock, held_s: now_ns.saturating_sub(self.start_ns) as f64 * 1e-9, shifts_px }
     }
 }
 
@@ -445,7 +451,7 @@ mod tests {
         let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
         assert!(rec.is_searching(Role::Target, View::Left) && !set.is_active(Role::Gripper, View::Left), "lost trackers rest while searched for");
         let step = run(&mut rec, &mut set, &knocked, &still, 60);
-        let RecoveryStep::Recovered { knock: Some((View::Left, shift)), held_s } = step else { panic!("{step:?}") };
+        let RecoveryStep::Recovered { knock: Some((View::Left, shift)), held_s, .. } = step else { panic!("{step:?}") };
         assert!((shift[0] + 63.0).abs() < 1.0 && (shift[1] - 7.0).abs() < 1.0, "{shift:?}");
         assert!(held_s > 0.0);
         // Both trackers of the view sit on their shapes again.
@@ -470,7 +476,9 @@ mod tests {
         assert_eq!(step, RecoveryStep::Searching, "nothing to find: it keeps holding; found {:?} conf {:?}", t.corners().collect::<Vec<_>>(), t.confidence());
         let nudged = scene(0, 0, 25, false);
         let step = run(&mut rec, &mut set, &still, &nudged, 60);
-        assert!(matches!(step, RecoveryStep::Recovered { knock: None, .. }), "{step:?}");
+        let RecoveryStep::Recovered { knock: None, shifts_px, .. } = step else { panic!("{step:?}") };
+        let d = shifts_px[slot_index(Role::Target, View::Right)].expect("the target's shift");
+        assert!((d[0] - 25.0).abs() < 1.0 && d[1].abs() < 1.0 && shifts_px[0].is_none(), "{shifts_px:?}");
         let t = set.get(Role::Target, View::Right).unwrap();
         let c = t.corners().next().unwrap();
         assert!((c.x - (159.5 + 25.0)).abs() < 1.0 && (c.y - 189.5).abs() < 1.0, "{c:?}");

@@ -55,6 +55,9 @@ const LOCAL_CAGE: [[f64; 3]; 7] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0,
 /// vectors' ends, px) means the target moved: the mean starts again from it.
 const TARGET_JUMP_PX: f64 = 3.0;
 
+/// A target re-found further than this from where it was lost moved (a nudged block), px.
+pub const TARGET_MOVED_PX: f64 = 4.0;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
     /// The coarse approach `MoveTo` is to be sent.
@@ -143,6 +146,8 @@ pub struct ServoPhase {
     /// Set again from the plate's final yaw when the servo converges. The grasp then comes
     /// straight down.
     pub approach_m: [f64; 3],
+    /// The target moved while lost: the next cycle starts the phase afresh on it.
+    restart: bool,
 }
 
 fn wrap(a: f64) -> f64 {
@@ -278,6 +283,7 @@ impl ServoPhase {
             target_recent,
             target_cage: TargetMean::default(),
             approach_pose: ([tool_goal.x, tool_goal.y, tool_goal.z], yaw_goal),
+            restart: false,
             local_robot_m: Vec::with_capacity(LOCAL_CAGE.len()),
             local_image_px: Vec::with_capacity(LOCAL_CAGE.len()),
             acc: [0.0; 7],
@@ -290,6 +296,17 @@ impl ServoPhase {
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(self.start_ns, c.time_ns, m.cfg.servo.convergence.timeout_s) {
             return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.convergence.timeout_s, m.servo.steps()));
+        }
+        if self.restart {
+            let start_ns = self.start_ns;
+            return match ServoPhase::new(m, c) {
+                Ok(p) => {
+                    *self = p;
+                    self.start_ns = start_ns;
+                    Step::Stay(Cmd::HOLD)
+                }
+                Err(fault) => Step::Fail(fault),
+            };
         }
         // Every frame adds to the target's running means (it stands still; the arm moves).
         if let Ok((target, _)) = views(m) {
@@ -341,9 +358,19 @@ impl ServoPhase {
     /// A loss before the local model was fitted (during the approach or the local cage)
     /// voids the cage's samples so far: the cage starts again from the approach pose and
     /// fits the local model to the cameras (and the target) as they are now.
-    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>) {
+    ///
+    /// A target re-found more than [`TARGET_MOVED_PX`] from where it was lost (and no
+    /// camera moved) has been moved: the servo starts over on it from its approach, with the
+    /// goal, the facet's normal and the local model taken again where it is now.
+    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>, target_shift_px: f64) {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         m.reporting.set_status("servo: resumed after re-acquiring");
+        if knock.is_none() && target_shift_px > TARGET_MOVED_PX {
+            tracing::warn!(target_shift_px, "servo: the target came back elsewhere: it moved; starting the servo again on it");
+            m.reporting.set_status("servo: the target moved; starting again on it");
+            self.restart = true;
+            return;
+        }
         let Some((view, shift_px)) = knock else {
             self.wait = None;
             self.target_recent = TargetMean::default();
