@@ -11,23 +11,25 @@
 //! on entering a phase, and the failure text.
 
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
+use handeye_vision::tracker::{Role, StereoStates, View};
 use handeye_wire::hint::OperatorHint;
 use handeye_wire::report::{Failure, FailureKind};
 use handeye_wire::{
     monotonic_ns, robot_flags, Phase, RobotCommand, RobotState, Telemetry, NO_FRAME, TELEMETRY_CORNERS, WIRE_VERSION,
 };
 
+mod hold;
+
 use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
-use crate::config::{DaemonConfig, SafetyConfig};
+use crate::config::DaemonConfig;
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
-use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord, TrackerTiming};
+use crate::outcome::{DaemonOutcome, LoopTiming, LossRecord, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::phase::PhaseState;
-use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
-use crate::safety::{check_robot, check_trackers, needs_trackers};
+use crate::recovery::{LastGood, Recovery};
+use crate::safety::{check_robot, check_trackers};
 use crate::timing::LatencyHistogram;
 
 /// What one cycle produced: the command answering the frame, and what it asked the report
@@ -36,29 +38,6 @@ use crate::timing::LatencyHistogram;
 pub struct CycleOutput {
     pub command: RobotCommand,
     pub reports: ReportRequests,
-}
-
-/// The trackers `phase` needs that are lost or below their confidence this cycle (active
-/// ones only), with what is wrong with each.
-fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, String)> {
-    let (gripper, target) = needs_trackers(phase);
-    let mut lost = Vec::new();
-    for (role, needed) in [(Role::Gripper, gripper), (Role::Target, target)] {
-        for view in View::ALL {
-            if !needed || !trackers.is_active(role, view) {
-                continue;
-            }
-            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
-            let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
-            match states.get(role, view) {
-                Some(TrackState::Lost(why)) => lost.push((role, view, why.to_string())),
-                None => lost.push((role, view, "did not run".to_string())),
-                Some(TrackState::Tracking) if score.is_nan() || score < min => lost.push((role, view, format!("confidence {score:.2} < {min}"))),
-                Some(TrackState::Tracking) => {}
-            }
-        }
-    }
-    lost
 }
 
 /// The daemon's state between frames.
@@ -96,6 +75,10 @@ pub struct HardLoop {
     /// Move commands a phase asked for while a tracker it needs was lost, turned into
     /// holds where commands are stamped (a bug if ever non-zero; see `cycle`).
     moves_refused: u64,
+    /// Each hold for lost trackers, for `daemon.json`; the one under way: its phase and the
+    /// frame id it began on.
+    losses: Vec<LossRecord>,
+    loss_began: (Phase, u64),
 }
 
 impl HardLoop {
@@ -124,6 +107,8 @@ impl HardLoop {
             held_ns: 0,
             last_good: [None; 4],
             moves_refused: 0,
+            losses: Vec::new(),
+            loss_began: (Phase::AcquireGripper, 0),
         })
     }
 
@@ -199,44 +184,6 @@ impl HardLoop {
         CycleOutput { command, reports: self.mission.reporting.take_requests() }
     }
 
-    /// Remembers each confidently tracking contour's frame: a later search starts there
-    /// rather than where a contour drifted to while it was being lost.
-    fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
-        let cfg = &self.mission.cfg.safety;
-        for role in [Role::Gripper, Role::Target] {
-            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
-            for view in View::ALL {
-                let Some(t) = self.mission.trackers.get(role, view) else { continue };
-                let score = t.confidence().score;
-                if matches!(states.get(role, view), Some(TrackState::Tracking)) && score >= min {
-                    self.last_good[slot_index(role, view)] = Some(LastGood { frame: t.frame(), time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
-                }
-            }
-        }
-    }
-
-    /// The one place every command passes before it is stamped: a move while a tracker the
-    /// phase that asked for it needs is lost, unsure, or being searched for never goes out
-    /// (it becomes a hold, and is counted and logged as the bug it would be).
-    fn refuse_blind_moves(&mut self, cmd: Cmd, phase: Phase, states: &StereoStates) -> Cmd {
-        if !cmd.is_move() {
-            return cmd;
-        }
-        let blind = if self.recovery.is_some() {
-            Err(Fault::new(FailureKind::TrackerLost, "holding for a lost tracker"))
-        } else {
-            check_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers)
-        };
-        match blind {
-            Ok(()) => cmd,
-            Err(why) => {
-                self.moves_refused += 1;
-                tracing::error!(phase = phase.name(), reason = %why, "a move was asked for on a lost track: holding instead");
-                Cmd::HOLD
-            }
-        }
-    }
-
     fn decide(&mut self, frame_index: u64, frame_id: u64, tick: FrameTick, left: &ImageView<'_>, right: &ImageView<'_>, states: StereoStates) -> Cmd {
         if self.phase.is_terminal() {
             return Cmd::HOLD;
@@ -260,23 +207,7 @@ impl HardLoop {
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // A tracker the phase needs is lost: hold the arm and search for it (unless
             // holding is switched off).
-            let lost = lost_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers);
-            let patience_s = self.mission.cfg.safety.loss_patience_s;
-            if patience_s > 0.0 && !lost.is_empty() {
-                let cfg = &self.mission.cfg.safety;
-                let min_scores = [cfg.min_tracker_score, cfg.min_target_score];
-                let rec = Recovery::start(&mut self.mission.trackers, &lost, &self.last_good, tick.now_ns, patience_s, min_scores);
-                let what = rec.what();
-                tracing::warn!(phase = phase.name(), %what, "tracker lost: holding the arm and searching");
-                // Both contours of one view at once: that camera has most likely moved.
-                let moved = View::ALL.into_iter().find(|&v| [Role::Gripper, Role::Target].iter().all(|&r| lost.iter().any(|l| l.0 == r && l.1 == v)));
-                match moved {
-                    Some(View::Left) => self.mission.reporting.set_status("left camera moved: holding, re-acquiring"),
-                    Some(View::Right) => self.mission.reporting.set_status("right camera moved: holding, re-acquiring"),
-                    None => self.mission.reporting.set_status(&format!("holding: {what}; searching")),
-                }
-                self.mission.reporting.snapshot(if moved.is_some() { "camera_moved" } else { "lost" });
-                self.recovery = Some(rec);
+            if self.start_hold(phase, frame_id, tick.now_ns, &states) {
                 return Cmd::STOP;
             }
             self.stop_reason(Phase::Stopped, fault);
@@ -287,38 +218,6 @@ impl HardLoop {
             Step::Stay(c) | Step::Next(c) => c,
             Step::Fail(fault) => {
                 self.stop_reason(Phase::Failed, fault);
-                Cmd::STOP
-            }
-        }
-    }
-
-    /// A cycle while holding for lost trackers: contours the phase needs that are lost now
-    /// join the search; the search runs; the phase resumes when all are back, the run stops
-    /// when the patience is spent.
-    fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
-        let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
-        for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
-            rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);
-        }
-        let epipolar = self.mission.calibration.get().map(|cal| EpipolarCheck {
-            constraint: cal.model.epipolar(),
-            tol_px: 2.0 * self.mission.cfg.target.max_epipolar_px,
-        });
-        match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
-            RecoveryStep::Searching => Cmd::HOLD,
-            RecoveryStep::Recovered { knock, held_s, shifts_px } => {
-                tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
-                let held_ns = now_ns.saturating_sub(rec.start_ns());
-                self.recovery = None;
-                self.recoveries += 1;
-                self.held_ns += held_ns;
-                self.mission.reporting.snapshot("reacquired");
-                self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
-                Cmd::HOLD
-            }
-            RecoveryStep::Failed(reason) => {
-                self.recovery = None;
-                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
                 Cmd::STOP
             }
         }
@@ -489,6 +388,7 @@ impl HardLoop {
                 recoveries: self.recoveries(),
                 held_s: self.held_s(),
                 moves_refused: self.moves_refused(),
+                losses: self.losses.clone(),
             },
             servo_trace: m.servo.trace().to_vec(),
             wall_s,
