@@ -89,6 +89,14 @@ pub struct TaskRecord {
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
+    /// The holds for lost trackers (flattened: the keys stay top-level).
+    #[serde(flatten)]
+    pub holds: HoldRecord,
+}
+
+/// The arm's holds for lost trackers over the run (issue 18).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct HoldRecord {
     /// Tracker losses recovered from: the arm held, the lost contours were found again and
     /// the phase resumed (a knocked camera is one).
     pub recoveries: u32,
@@ -158,10 +166,7 @@ mod tests {
                 target_attempts: 1,
                 grip_width_mm: None,
                 stop_frame_id: Some(u64::MAX),
-                recoveries: 0,
-                held_s: 0.0,
-                moves_refused: 0,
-                losses: vec![],
+                holds: HoldRecord::default(),
             },
             servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
             wall_s: 31.5,

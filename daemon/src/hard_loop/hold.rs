@@ -143,3 +143,52 @@ impl HardLoop {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+
+    /// A dark square on a light ground, and a loop whose four trackers sit on it.
+    fn tracking_loop() -> (HardLoop, ImageBuf) {
+        let mut img = ImageBuf::filled(160, 120, 200);
+        for y in 40..80 {
+            for x in 60..100 {
+                img.set(x, y, 50);
+            }
+        }
+        let square = [[59.5, 39.5], [99.5, 39.5], [99.5, 79.5], [59.5, 79.5]];
+        let mut hl = HardLoop::new(crate::config::DaemonConfig::default(), None).unwrap();
+        for role in [Role::Gripper, Role::Target] {
+            for v in View::ALL {
+                hl.mission.trackers.insert(role, v, ContourTracker::new(TrackerConfig::default(), &square).unwrap());
+            }
+        }
+        (hl, img)
+    }
+
+    #[test]
+    fn a_move_on_a_lost_or_searched_track_becomes_a_hold() {
+        let (mut hl, img) = tracking_loop();
+        let go = Cmd::move_by([0.01, 0.0, 0.0], 0.0, 0.05);
+        let states = hl.mission.trackers.update(&img.view(), &img.view(), 0.03);
+        // Everything tracks: the servo's move goes out.
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Servo, &states), go);
+        // The right view goes blank (both its trackers lost): the servo may not move.
+        let blank = ImageBuf::filled(160, 120, 200);
+        let (s_left, s_right) = (img.view(), blank.view());
+        let states = hl.mission.trackers.update(&s_left, &s_right, 0.03);
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Servo, &states), Cmd::HOLD);
+        assert_eq!(hl.moves_refused(), 1);
+        // A hold or a stop always passes.
+        assert_eq!(hl.refuse_blind_moves(Cmd::STOP, Phase::Servo, &states), Cmd::STOP);
+        // While lost trackers are searched for, no move goes out in any phase.
+        let lost = lost_trackers(&hl.mission.cfg.safety, Phase::Servo, &states, &hl.mission.trackers);
+        assert!(!lost.is_empty() && lost.iter().all(|l| l.1 == View::Right), "{lost:?}");
+        assert!(hl.start_hold(Phase::Servo, 7, 0, &states));
+        assert!(hl.recovery.as_ref().is_some_and(|r| r.is_searching(Role::Target, View::Right)));
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Calibrate, &states), Cmd::HOLD);
+        assert_eq!(hl.moves_refused(), 2);
+    }
+}

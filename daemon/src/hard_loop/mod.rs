@@ -24,7 +24,7 @@ use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
 use crate::config::DaemonConfig;
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
-use crate::outcome::{DaemonOutcome, LoopTiming, LossRecord, RunEnd, TaskRecord, TrackerTiming};
+use crate::outcome::{DaemonOutcome, HoldRecord, LoopTiming, LossRecord, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::phase::PhaseState;
@@ -385,10 +385,7 @@ impl HardLoop {
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 stop_frame_id: self.stopped_at_frame(),
-                recoveries: self.recoveries(),
-                held_s: self.held_s(),
-                moves_refused: self.moves_refused(),
-                losses: self.losses.clone(),
+                holds: HoldRecord { recoveries: self.recoveries(), held_s: self.held_s(), moves_refused: self.moves_refused(), losses: self.losses.clone() },
             },
             servo_trace: m.servo.trace().to_vec(),
             wall_s,
