@@ -31,15 +31,15 @@
 //! which an occluder hides the target facet (fewer than half of its pixels at hint time
 //! visible in either view while an occluder crosses the scene), so a test can tell how quickly the daemon reacted.
 //!
-//! And it checks every command against the telemetry of the frame it answered: a move
-//! (`MoveTo`, `MoveBy`) answering a frame on which a tracker the daemon's phase works with
-//! (the plate's in calibrate, plan and acquire_target; all four in the servo) was not
-//! tracking is counted in `moves_on_lost_track` (issue 18: never move on a lost track).
+//! And it checks every command against the telemetry of the frame it answered
+//! ([`crate::referee::blind_moves`]): a move answering a frame on which a tracker the daemon's
+//! phase works with was not tracking is counted in `moves_on_lost_track` (issue 18).
 
 use glam::DVec3;
 use handeye_wire::{CommandKind, Phase, RobotCommand, Telemetry};
 use serde::{Deserialize, Serialize};
 
+use crate::referee::blind_moves::BlindMoves;
 use crate::referee::hint::HintFacet;
 use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
 use crate::simulator::Simulator;
@@ -148,21 +148,8 @@ pub struct DaemonWatch {
     last_phase: Option<u32>,
     #[serde(skip)]
     facet_px_at_hint: Option<[u32; 2]>,
-    /// Recent telemetry: frame id and whether a tracker its phase uses was not tracking.
     #[serde(skip)]
-    recent_blind: std::collections::VecDeque<(u64, bool)>,
-    /// Frame ids of moves whose frame's telemetry has not been read yet.
-    #[serde(skip)]
-    pending_moves: Vec<u64>,
-}
-
-/// Telemetry slots (gripper left, right, target left, right) a phase moves the arm by.
-fn slots_used(phase: Phase) -> &'static [usize] {
-    match phase {
-        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => &[0, 1],
-        Phase::Servo => &[0, 1, 2, 3],
-        _ => &[],
-    }
+    blind: BlindMoves,
 }
 
 impl DaemonWatch {
@@ -199,34 +186,18 @@ impl DaemonWatch {
         if cmd.kind == CommandKind::Stop as u32 && self.first_stop_command_frame.is_none() {
             self.first_stop_command_frame = Some(frame);
         }
-        if cmd.kind == CommandKind::MoveTo as u32 || cmd.kind == CommandKind::MoveBy as u32 {
-            match self.recent_blind.iter().find(|(id, _)| *id == cmd.frame_id) {
-                Some(&(id, blind)) => self.judge_move(id, blind),
-                None => self.pending_moves.push(cmd.frame_id),
-            }
-        }
-    }
-
-    fn judge_move(&mut self, frame_id: u64, blind: bool) {
-        if blind {
-            self.moves_on_lost_track += 1;
-            self.first_move_on_lost_track_frame.get_or_insert(frame_id);
-        }
+        self.blind.command(cmd);
+        self.moves_on_lost_track = self.blind.count;
+        self.first_move_on_lost_track_frame = self.blind.first_frame;
     }
 
     /// A telemetry sample read while the simulator was at `frame` (before stepping past it).
     pub fn telemetry(&mut self, sim: &Simulator, frame: u64, t: &Telemetry) {
         self.telemetry += 1;
         let Some(phase) = Phase::from_u32(t.phase) else { return };
-        let blind = slots_used(phase).iter().any(|&i| t.tracker_state[i] != 1);
-        if self.recent_blind.len() >= 64 {
-            self.recent_blind.pop_front();
-        }
-        self.recent_blind.push_back((t.frame_id, blind));
-        if let Some(k) = self.pending_moves.iter().position(|&id| id == t.frame_id) {
-            self.pending_moves.swap_remove(k);
-            self.judge_move(t.frame_id, blind);
-        }
+        self.blind.telemetry(t);
+        self.moves_on_lost_track = self.blind.count;
+        self.first_move_on_lost_track_frame = self.blind.first_frame;
         if phase == Phase::Plan {
             self.plan.frames += 1;
             if t.planning == 1 {
