@@ -1,5 +1,6 @@
-//! End to end, two processes: what stops the arm. An occluder hiding the target; the
-//! simulator (cameras and robot) killed mid-servo; the daemon killed mid-motion.
+//! End to end, two processes: what stops the arm. The simulator (cameras and robot) killed
+//! mid-servo; the daemon killed mid-motion. (An occluder hiding the target now holds the arm
+//! and the pick goes on: `tests/e2e_recovery.rs`.)
 
 mod e2e_support;
 
@@ -7,7 +8,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use e2e_support::{one_at_a_time, run, scenario_without_antialias, TempDir};
+use e2e_support::{one_at_a_time, scenario_without_antialias, TempDir};
 use handeye_wire::message::{MessageEvent, MessageSubscriber};
 use handeye_wire::{monotonic_ns, robot_flags, CommandKind, Domain, Phase, RobotCommand, RobotState, Telemetry, WireNode};
 
@@ -104,22 +105,6 @@ fn watch(tel: &mut MessageSubscriber<Telemetry>, timeout: Duration, mut until: i
         }
     }
     None
-}
-
-#[test]
-fn an_occluder_hiding_the_target_stops_the_arm_within_three_frames() {
-    let r = run("pick_cube_occluder.toml", &[]);
-    let why = r.explain();
-    assert_eq!(r.summary["success"], false, "{why}");
-    assert_eq!(r.summary["final_phase"], "stopped", "{why}");
-    assert!(r.summary["failure_reason"].as_str().unwrap().contains("target tracker"), "{why}");
-    let w = &r.sim.daemon;
-    let hidden = w.target_hidden_frame.expect("the occluder hid the target");
-    let stop = w.first_stop_command_frame.expect("a Stop command");
-    assert!(stop <= hidden + 3, "hidden on frame {hidden}, Stop answered frame {stop}\n{why}");
-    // It was the servo that was interrupted, not something earlier.
-    assert_eq!(r.summary["phase_reached"], "servo", "{why}");
-    assert_eq!(r.daemon["stop_frame_id"].as_u64(), Some(stop), "{why}");
 }
 
 #[test]

@@ -519,6 +519,11 @@ pub struct SafetyConfig {
     /// while tracking well); a face hidden or lost drops far below it, or the tracker
     /// reports itself lost.
     pub min_target_score: f64,
+    /// How long the arm holds while a lost tracker (any phase that needs one) is searched
+    /// for before the run fails naming it, s of camera time (`daemon/src/recovery.rs`). 0:
+    /// never hold, a lost tracker stops the run at once. Time held does not count against
+    /// the phase's own time-out.
+    pub loss_patience_s: f64,
 }
 
 impl Default for SafetyConfig {
@@ -530,6 +535,7 @@ impl Default for SafetyConfig {
             state_stale_ms: 200,
             min_tracker_score: 0.6,
             min_target_score: 0.45,
+            loss_patience_s: 8.0,
         }
     }
 }
@@ -695,6 +701,9 @@ impl DaemonConfig {
             if !pos(v) {
                 return bad(field, v.to_string(), "a finite number > 0");
             }
+        }
+        if !(self.safety.loss_patience_s.is_finite() && self.safety.loss_patience_s >= 0.0) {
+            return bad("safety.loss_patience_s", self.safety.loss_patience_s.to_string(), "a finite number >= 0 (0: never hold)");
         }
         if !(self.timing.done_hold_s.is_finite() && self.timing.done_hold_s >= 0.0) {
             return bad("done_hold_s", self.timing.done_hold_s.to_string(), ">= 0");
@@ -953,6 +962,7 @@ mod tests {
             "safety.state_stale_ms",
             "safety.min_tracker_score",
             "safety.min_target_score",
+            "safety.loss_patience_s",
             "tracker.points",
             "tracker.search_px",
             "tracker.min_contrast",
@@ -1044,6 +1054,8 @@ mod tests {
         assert!(err.contains("t.toml") && err.contains("tracker.passes") && err.contains("1..=8"), "{err}");
         let err = DaemonConfig::parse("[tracker]\nrefine_search_px = 0.5\n", Path::new("t.toml")).unwrap_err().to_string();
         assert!(err.contains("tracker.refine_search_px"), "{err}");
+        let err = DaemonConfig::parse("[safety]\nloss_patience_s = -1.0\n", Path::new("s.toml")).unwrap_err().to_string();
+        assert!(err.contains("s.toml") && err.contains("safety.loss_patience_s") && err.contains(">= 0"), "{err}");
     }
 
     #[test]

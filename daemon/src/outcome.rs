@@ -93,8 +93,46 @@ pub struct TaskRecord {
     pub grip_width_mm: Option<f64>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
-    /// Camera knocks the trackers recovered from.
+    /// The holds for lost trackers (flattened: the keys stay top-level).
+    #[serde(flatten)]
+    pub holds: HoldRecord,
+}
+
+/// The arm's holds for lost trackers over the run (issue 18).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct HoldRecord {
+    /// Tracker losses recovered from: the arm held, the lost contours were found again and
+    /// the phase resumed (a knocked camera is one).
     pub recoveries: u32,
+    /// Camera time the arm held for lost trackers, over the run, s.
+    #[serde(default)]
+    pub held_s: f64,
+    /// Moves a phase asked for while a tracker it needed was lost, refused where commands
+    /// are stamped (0 unless the daemon has a bug: a lost track never moves the arm).
+    #[serde(default)]
+    pub moves_refused: u64,
+    /// Each time the arm held for lost trackers: what, why, for how long, and how it ended.
+    #[serde(default)]
+    pub losses: Vec<LossRecord>,
+}
+
+/// One hold for lost trackers (issue 18 item 7).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LossRecord {
+    /// The phase it happened in.
+    pub phase: String,
+    /// Frame id on which the arm was stopped for it.
+    pub frame_id: u64,
+    /// Each lost tracker and what it said ("target tracker (left view) lost: ...").
+    pub what: String,
+    /// Camera time the arm held, s.
+    pub held_s: f64,
+    /// `recovered`, or why not.
+    pub outcome: String,
+    /// Each re-found contour's shift from its last good frame, px (gripper left, gripper
+    /// right, target left, target right; `null`: not lost, or not found).
+    pub shifts_px: [Option<[f64; 2]>; 4],
 }
 
 #[cfg(test)]
@@ -132,7 +170,7 @@ mod tests {
                 target_attempts: 1,
                 grip_width_mm: None,
                 stop_frame_id: Some(u64::MAX),
-                recoveries: 0,
+                holds: HoldRecord::default(),
             },
             servo_trace: vec![ServoTraceRow { step: 1, frame: 400, error: [0.5; 6], offset_m: 0.01, offset_yaw_rad: 0.02 }],
             stale_frame_commands: 0,
@@ -148,7 +186,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

@@ -89,6 +89,12 @@ impl ShiftSearch {
     /// Tries this frame's share of the candidates on `image` with copies of `base` (the
     /// lost tracker: its template and settings).
     pub fn step(&mut self, base: &ContourTracker, image: &ImageView<'_>) -> SearchStep {
+        self.step_where(base, image, |_| true)
+    }
+
+    /// [`Self::step`], taking only candidates `accept` agrees to (e.g. not on another tracked
+    /// contour, consistent with the other view).
+    pub fn step_where(&mut self, base: &ContourTracker, image: &ImageView<'_>, accept: impl Fn(&ContourTracker) -> bool) -> SearchStep {
         let end = (self.next + self.settings.candidates_per_frame).min(self.candidates.len());
         for &d in &self.candidates[self.next..end] {
             let mut t: ContourTracker = base.clone();
@@ -101,6 +107,9 @@ impl ShiftSearch {
             let ratio = t.frame().det() / self.frame.det();
             let max = self.settings.max_area_ratio.max(1.0);
             if !(1.0 / max..=max).contains(&ratio) {
+                continue;
+            }
+            if !accept(&t) {
                 continue;
             }
             let score = t.confidence().score;

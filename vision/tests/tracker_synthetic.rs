@@ -208,3 +208,37 @@ fn leaving_the_image_is_reported_as_such() {
     }
     assert!(matches!(state, TrackState::Lost(LostReason::LeftImage { .. })), "{state:?}");
 }
+
+/// The light dims by 30 % over a second (intensity and ambient alike: every grey level
+/// scaled by 0.7) while a block face is tracked next to a darker neighbouring face, then
+/// brightens back: the tracker keeps the face (its learnt inside grey level follows the light
+/// instead of locking the edges out), within a pixel, throughout.
+#[test]
+fn a_thirty_percent_light_ramp_is_followed_not_locked_out() {
+    let face = [[100.5, 80.5], [160.5, 80.5], [160.5, 140.5], [100.5, 140.5]];
+    let render = |gain: f64| {
+        let g = |v: f64| (v * gain).round().clamp(0.0, 255.0) as u8;
+        let mut img = ImageBuf::filled(260, 220, g(60.0));
+        for y in 81..141 {
+            for x in 60..101 {
+                img.set(x, y, g(120.0)); // the neighbouring face, left of the tracked one
+            }
+            for x in 101..161 {
+                img.set(x, y, g(190.0));
+            }
+        }
+        img
+    };
+    let config = TrackerConfig { edge_sign: EdgeSign::Learned, ..TrackerConfig::default() };
+    let mut t = ContourTracker::new(config, &face).unwrap();
+    let mut gains: Vec<f64> = vec![1.0; 10];
+    gains.extend((1..=30).map(|k| 1.0 - 0.3 * f64::from(k) / 30.0));
+    gains.extend(vec![0.7; 10]);
+    gains.extend((1..=30).map(|k| 0.7 + 0.3 * f64::from(k) / 30.0));
+    for (k, &gain) in gains.iter().enumerate() {
+        let img = render(gain);
+        let state = t.update(&img.view(), 1.0 / 30.0);
+        assert!(state.is_tracking(), "frame {k} (light x{gain:.2}): {state:?}");
+        assert!(corner_rms(&t, &face) < 1.0, "frame {k} (light x{gain:.2}): {:.2} px off", corner_rms(&t, &face));
+    }
+}

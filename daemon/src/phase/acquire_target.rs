@@ -23,6 +23,12 @@ impl AcquireTarget {
         Self { start_ns: time_ns, started: false, frames: 0 }
     }
 
+    /// Picks up after the arm held `held_ns` for the gripper's trackers: the time held does
+    /// not count (the target's trackers kept converging meanwhile).
+    pub fn resume(&mut self, held_ns: u64) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+    }
+
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(self.start_ns, c.time_ns, m.cfg.target.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("acquire_target: timed out after {} s", m.cfg.target.timeout_s));

@@ -79,6 +79,10 @@ impl CalibrationView {
     }
 }
 
+/// A plate re-found further than this from where it was lost (the arm held) means its
+/// camera moved, px (a stopping arm drifts a few pixels at most).
+pub const CAMERA_MOVED_PX: f64 = 15.0;
+
 pub struct Calibrate {
     start_ns: u64,
     stage_ns: u64,
@@ -105,6 +109,30 @@ impl Calibrate {
             acc_x: [0.0; 3],
             fitted: None,
             arrived_back: false,
+        }
+    }
+
+    /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count
+    /// against the phase; the move under way is sent again (the arm stopped short of it), and
+    /// a point being sampled is visited and sampled afresh (its samples may have included the
+    /// frames that lost the plate). A plate found `plate_shift_px` or more from where it was
+    /// lost, with the arm held still, means the camera moved: the samples so far belong to
+    /// the camera as it was, and the cage starts again (at `now_ns`, with a fresh time-out).
+    pub fn resume(&mut self, now_ns: u64, held_ns: u64, plate_shift_px: f64) {
+        if plate_shift_px > CAMERA_MOVED_PX && self.fitted.is_none() {
+            tracing::warn!(plate_shift_px, "calibrate: the plate came back elsewhere: a camera moved; visiting the cage again");
+            self.robot_m.clear();
+            self.image_px.clear();
+            self.start_ns = now_ns;
+            self.stage_ns = now_ns;
+            self.stage = Stage::Moving { i: 0, wait: None };
+            return;
+        }
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        self.stage_ns = self.stage_ns.saturating_add(held_ns);
+        match &mut self.stage {
+            Stage::Moving { wait, .. } | Stage::Fitting { wait, .. } => *wait = None,
+            Stage::Sampling { i, .. } => self.stage = Stage::Moving { i: *i, wait: None },
         }
     }
 

@@ -22,6 +22,7 @@ pub mod step;
 pub use job::WORKER_DELAY_FRAMES;
 pub use step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
 
+use handeye_vision::tracker::View;
 use handeye_wire::Phase;
 
 use crate::mission::Mission;
@@ -58,6 +59,21 @@ impl PhaseState {
 
     pub fn is_terminal(&self) -> bool {
         matches!(self, Self::Done { .. } | Self::Failed | Self::Stopped)
+    }
+
+    /// Picks the phase up again after the arm held `held_ns` of camera time while lost
+    /// trackers were searched for ([`crate::recovery`]); `knock`: a camera moved, its view and
+    /// image shift; `shifts_px`: how far each re-found contour was from its last good frame
+    /// (by `recovery::slot_index`: gripper left, right, target left, right).
+    pub fn resume(&mut self, m: &mut Mission, now_ns: u64, held_ns: u64, knock: Option<(View, [f64; 2])>, shifts_px: [Option<[f64; 2]>; 4]) {
+        let far = |d: Option<[f64; 2]>| d.map_or(0.0, |d| d[0].hypot(d[1]));
+        match self {
+            Self::Calibrate(p) => p.resume(now_ns, held_ns, far(shifts_px[0]).max(far(shifts_px[1]))),
+            Self::Plan(p) => p.resume(held_ns),
+            Self::AcquireTarget(p) => p.resume(held_ns),
+            Self::Servo(p) => p.resume(m, held_ns, knock, far(shifts_px[2]).max(far(shifts_px[3]))),
+            Self::AcquireGripper(_) | Self::Grasp(_) | Self::Lift(_) | Self::Done { .. } | Self::Failed | Self::Stopped => {}
+        }
     }
 
     /// Runs the current phase for one cycle; on `Next` builds the following phase.

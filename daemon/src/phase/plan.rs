@@ -116,6 +116,18 @@ impl PlanPhase {
         View::ALL.map(|v| m.trackers.get(Role::Gripper, v).map_or(0, |t| t.update_count()))
     }
 
+    /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count;
+    /// a park move under way is sent again, a settle starts over; a pair already with the
+    /// planner stays there (it was taken before the loss).
+    pub fn resume(&mut self, held_ns: u64) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        match &mut self.stage {
+            Stage::Park { wait } => *wait = None,
+            Stage::Settle { still } => *still = 0,
+            Stage::Planning { .. } => {}
+        }
+    }
+
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(self.start_ns, c.time_ns, m.cfg.plan.timeout_s) {
             return Step::fail(FailureKind::TimedOut, format!("plan: timed out after {} s at {:?}", m.cfg.plan.timeout_s, self.stage));

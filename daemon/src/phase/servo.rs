@@ -55,6 +55,9 @@ const LOCAL_CAGE: [[f64; 3]; 7] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0,
 /// vectors' ends, px) means the target moved: the mean starts again from it.
 const TARGET_JUMP_PX: f64 = 3.0;
 
+/// A target re-found further than this from where it was lost moved (a nudged block), px.
+pub const TARGET_MOVED_PX: f64 = 4.0;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
     /// The coarse approach `MoveTo` is to be sent.
@@ -143,6 +146,8 @@ pub struct ServoPhase {
     /// Set again from the plate's final yaw when the servo converges. The grasp then comes
     /// straight down.
     pub approach_m: [f64; 3],
+    /// The target moved while lost: the next cycle starts the phase afresh on it.
+    restart: bool,
 }
 
 fn wrap(a: f64) -> f64 {
@@ -278,6 +283,7 @@ impl ServoPhase {
             target_recent,
             target_cage: TargetMean::default(),
             approach_pose: ([tool_goal.x, tool_goal.y, tool_goal.z], yaw_goal),
+            restart: false,
             local_robot_m: Vec::with_capacity(LOCAL_CAGE.len()),
             local_image_px: Vec::with_capacity(LOCAL_CAGE.len()),
             acc: [0.0; 7],
@@ -290,6 +296,17 @@ impl ServoPhase {
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(self.start_ns, c.time_ns, m.cfg.servo.convergence.timeout_s) {
             return Step::fail(FailureKind::NotConverged, format!("servo: not converged after {} s ({} steps)", m.cfg.servo.convergence.timeout_s, m.servo.steps()));
+        }
+        if self.restart {
+            let start_ns = self.start_ns;
+            return match ServoPhase::new(m, c) {
+                Ok(p) => {
+                    *self = p;
+                    self.start_ns = start_ns;
+                    Step::Stay(Cmd::HOLD)
+                }
+                Err(fault) => Step::Fail(fault),
+            };
         }
         // Every frame adds to the target's running means (it stands still; the arm moves).
         if let Ok((target, _)) = views(m) {
@@ -331,16 +348,43 @@ impl ServoPhase {
         }
     }
 
-    /// Picks up again after the arm was stopped for a re-acquisition: the pending move is
-    /// void (the arm stopped where it was), the servo starts afresh from a new look.
-    /// `shift_px` is how far the moved camera's image went: its affine model's offset moves
+    /// Picks up again after the arm held `held_ns` for a lost tracker: the time held does not
+    /// count, the pending move is void (the arm stopped where it was), the servo starts
+    /// afresh from a new look (its Broyden memory of the interrupted move is dropped).
+    /// `knock`: one camera moved, its image by `shift_px`: its affine model's offset moves
     /// with it (the first-order effect of a small knock). The goal, held in the facet's
     /// frame, needs nothing: it is turned into image terms from the re-acquired target.
     ///
-    /// A knock before the local model was fitted (during the approach or the local cage)
+    /// A loss before the local model was fitted (during the approach or the local cage)
     /// voids the cage's samples so far: the cage starts again from the approach pose and
-    /// fits the local model to the moved camera as it is now.
-    pub fn resume(&mut self, m: &mut Mission, view: View, shift_px: [f64; 2]) {
+    /// fits the local model to the cameras (and the target) as they are now.
+    ///
+    /// A target re-found more than [`TARGET_MOVED_PX`] from where it was lost (and no
+    /// camera moved) has been moved: the servo starts over on it from its approach, with the
+    /// goal, the facet's normal and the local model taken again where it is now.
+    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>, target_shift_px: f64) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        m.reporting.set_status("servo: resumed after re-acquiring");
+        if knock.is_none() && target_shift_px > TARGET_MOVED_PX {
+            tracing::warn!(target_shift_px, "servo: the target came back elsewhere: it moved; starting the servo again on it");
+            m.reporting.set_status("servo: the target moved; starting again on it");
+            self.restart = true;
+            return;
+        }
+        let Some((view, shift_px)) = knock else {
+            self.wait = None;
+            self.target_recent = TargetMean::default();
+            if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
+                self.local_robot_m.clear();
+                self.local_image_px.clear();
+                self.target_cage = TargetMean::default();
+                self.stage = Stage::Approach;
+            } else {
+                self.stage = Stage::Servo { converging: false };
+            }
+            self.servo.reset();
+            return;
+        };
         self.wait = None;
         self.target_recent = TargetMean::default();
         self.stage = if matches!(self.stage, Stage::Approach | Stage::LocalCage { .. }) {
@@ -365,7 +409,6 @@ impl ServoPhase {
             Ok(servo) => self.servo = servo,
             Err(_) => self.servo.reset(),
         }
-        m.reporting.set_status("servo: resumed after re-acquiring");
     }
 
     /// At local cage point `i` (arrived and settled): sample, then move on; after the last,

@@ -30,11 +30,16 @@
 //! why), the first `Stop` command, and, when the scenario has an occluder, the first frame on
 //! which an occluder hides the target facet (fewer than half of its pixels at hint time
 //! visible in either view while an occluder crosses the scene), so a test can tell how quickly the daemon reacted.
+//!
+//! And it checks every command against the telemetry of the frame it answered
+//! ([`crate::referee::blind_moves`]): a move answering a frame on which a tracker the daemon's
+//! phase works with was not tracking is counted in `moves_on_lost_track` (issue 18).
 
 use glam::DVec3;
 use handeye_wire::{CommandKind, Phase, RobotCommand, Telemetry};
 use serde::{Deserialize, Serialize};
 
+use crate::referee::blind_moves::BlindMoves;
 use crate::referee::hint::HintFacet;
 use crate::render::cell_scene::{PLATE_NORMAL_IN_PALM, plate_corners_in_palm};
 use crate::simulator::Simulator;
@@ -123,6 +128,12 @@ pub struct DaemonWatch {
     /// First frame on which the target facet was hidden (occluder scenarios only).
     #[serde(deserialize_with = "handeye_wire::report::required")]
     pub target_hidden_frame: Option<u64>,
+    /// Move commands answering a frame on which a tracker the phase used was not tracking
+    /// (must stay 0), and the first such frame.
+    #[serde(default)]
+    pub moves_on_lost_track: u64,
+    #[serde(default)]
+    pub first_move_on_lost_track_frame: Option<u64>,
     /// Telemetry samples read.
     pub telemetry: u64,
     /// The facet the target trackers were put on.
@@ -137,6 +148,8 @@ pub struct DaemonWatch {
     last_phase: Option<u32>,
     #[serde(skip)]
     facet_px_at_hint: Option<[u32; 2]>,
+    #[serde(skip)]
+    blind: BlindMoves,
 }
 
 impl DaemonWatch {
@@ -173,12 +186,18 @@ impl DaemonWatch {
         if cmd.kind == CommandKind::Stop as u32 && self.first_stop_command_frame.is_none() {
             self.first_stop_command_frame = Some(frame);
         }
+        self.blind.command(cmd);
+        self.moves_on_lost_track = self.blind.count;
+        self.first_move_on_lost_track_frame = self.blind.first_frame;
     }
 
     /// A telemetry sample read while the simulator was at `frame` (before stepping past it).
     pub fn telemetry(&mut self, sim: &Simulator, frame: u64, t: &Telemetry) {
         self.telemetry += 1;
         let Some(phase) = Phase::from_u32(t.phase) else { return };
+        self.blind.telemetry(t);
+        self.moves_on_lost_track = self.blind.count;
+        self.first_move_on_lost_track_frame = self.blind.first_frame;
         if phase == Phase::Plan {
             self.plan.frames += 1;
             if t.planning == 1 {

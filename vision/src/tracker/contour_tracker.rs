@@ -85,6 +85,8 @@ pub struct ContourTracker {
     ref_contrast: Vec<f32>,
     /// Learnt grey level just inside each point's edge (negative = not learnt yet).
     ref_inside: Vec<f32>,
+    /// Scratch for [`Self::follow_light`]: each inlier's seen / learnt inside grey level.
+    light_ratios: Vec<f32>,
     fit: FitBuffers,
     /// `ref_contrast`, `ref_inside` and `side_of` of a subset pass's points, in its order.
     subset_contrast: Vec<f32>,
@@ -156,6 +158,7 @@ impl ContourTracker {
             edges: Vec::with_capacity(n),
             ref_contrast: Vec::with_capacity(n),
             ref_inside: Vec::with_capacity(n),
+            light_ratios: Vec::with_capacity(n),
             fit: FitBuffers::with_capacity(n),
             side_of: Vec::with_capacity(n),
             subset_contrast: vec![0.0; n],
@@ -503,9 +506,43 @@ impl ContourTracker {
         None
     }
 
+    /// A change of light (intensity, ambient) scales the grey level inside every edge of the
+    /// contour alike, faster than the per-point appearance learning follows (it learns only
+    /// from edges within the tolerance, so a ramp of a few grey levels per frame would lock
+    /// the contour out). The median, over the inliers, of seen / learnt inside level is that
+    /// common factor: every learnt level is scaled by it (at most ±25 % per update). A
+    /// neighbouring face creeping in beside a few edges moves a minority of the ratios and
+    /// not the median.
+    fn follow_light(&mut self) {
+        self.light_ratios.clear();
+        let n = self.template.points().len();
+        for i in 0..n {
+            let k = self.fit.chosen[i];
+            let r = self.ref_inside[i];
+            if k < 0 || self.fit.residual[i].abs() > self.config.inlier_px || r < 8.0 {
+                continue;
+            }
+            self.light_ratios.push(self.edges[i].candidates[k as usize].inside as f32 / r);
+        }
+        if self.light_ratios.len() < 4 || 2 * self.light_ratios.len() < n {
+            return;
+        }
+        self.light_ratios.sort_unstable_by(f32::total_cmp);
+        let g = self.light_ratios[self.light_ratios.len() / 2].clamp(0.8, 1.25);
+        if (g - 1.0).abs() < 0.01 {
+            return;
+        }
+        for r in self.ref_inside.iter_mut().filter(|r| **r >= 0.0) {
+            *r = (*r * g).min(255.0);
+        }
+    }
+
     /// Each inlier point's reference contrast follows the edge it locked on to; with
     /// [`EdgeSign::Learned`] its sign is the point's polarity from then on.
     fn learn(&mut self) {
+        if self.updates > 0 {
+            self.follow_light();
+        }
         let rate = if self.updates == 0 { 1.0 } else { self.config.contrast_learning_rate as f32 };
         let appearance_rate = self.config.appearance_learning_rate as f32;
         for i in 0..self.template.points().len() {
@@ -614,5 +651,47 @@ impl ContourTracker {
             let h = self.edges[i].candidates[k as usize].h_px as f64;
             Some(Vector2::new(self.pos_x[i] + h * self.nrm_x[i], self.pos_y[i] + h * self.nrm_y[i]))
         })
+    }
+}
+
+#[cfg(test)]
+mod light_tests {
+    use super::*;
+    use crate::image::ImageBuf;
+    use crate::tracker::EdgeSign;
+
+    /// A face at grey 190 beside a darker face (120) on a dark table (60), every level scaled
+    /// by `gain` (the light).
+    fn scene(gain: f64) -> ImageBuf {
+        let g = |v: f64| (v * gain).round().clamp(0.0, 255.0) as u8;
+        let mut img = ImageBuf::filled(260, 220, g(60.0));
+        for y in 81..141 {
+            for x in 60..101 {
+                img.set(x, y, g(120.0));
+            }
+            for x in 101..161 {
+                img.set(x, y, g(190.0));
+            }
+        }
+        img
+    }
+
+    /// The learnt inside grey levels follow a 30 % dimming over a second (the per-point
+    /// learning alone lags it by more than the appearance tolerance and then stops learning:
+    /// the face's own edges would look wrong from then on).
+    #[test]
+    fn learnt_inside_levels_follow_a_thirty_percent_dimming() {
+        let face = [[100.5, 80.5], [160.5, 80.5], [160.5, 140.5], [100.5, 140.5]];
+        let config = TrackerConfig { edge_sign: EdgeSign::Learned, ..TrackerConfig::default() };
+        let mut t = ContourTracker::new(config, &face).unwrap();
+        let gains = (0..10).map(|_| 1.0).chain((1..=30).map(|k| 1.0 - 0.3 * f64::from(k) / 30.0)).chain((0..5).map(|_| 0.7));
+        for gain in gains {
+            assert!(t.update(&scene(gain).view(), 1.0 / 30.0).is_tracking());
+        }
+        let mut learnt: Vec<f32> = t.ref_inside.iter().copied().filter(|&r| r >= 0.0).collect();
+        learnt.sort_unstable_by(f32::total_cmp);
+        let median = learnt[learnt.len() / 2];
+        // The face is at 133 now (190 × 0.7); the tolerance is 10 grey levels.
+        assert!((median - 133.0).abs() < 8.0, "learnt inside level {median} for a face at 133");
     }
 }

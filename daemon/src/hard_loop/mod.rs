@@ -18,15 +18,17 @@ use handeye_wire::{
     monotonic_ns, robot_flags, Phase, RobotCommand, RobotState, Telemetry, NO_FRAME, TELEMETRY_CORNERS, WIRE_VERSION,
 };
 
+mod hold;
+
 use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
 use crate::config::DaemonConfig;
 use crate::fault::Fault;
 use crate::mission::{Mission, ReportRequests};
-use crate::outcome::{DaemonOutcome, LoopTiming, RunEnd, TaskRecord, TrackerTiming};
+use crate::outcome::{DaemonOutcome, HoldRecord, LoopTiming, LossRecord, RunEnd, TaskRecord, TrackerTiming};
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
 use crate::phase::PhaseState;
-use crate::recovery::{Recovery, RecoveryStep};
+use crate::recovery::{LastGood, Recovery};
 use crate::safety::{check_robot, check_trackers};
 use crate::timing::LatencyHistogram;
 
@@ -36,18 +38,6 @@ use crate::timing::LatencyHistogram;
 pub struct CycleOutput {
     pub command: RobotCommand,
     pub reports: ReportRequests,
-}
-
-/// The view whose gripper and target trackers are both lost (or unsure) while the other
-/// view tracks both confidently.
-fn moved_view(states: &StereoStates, trackers: &handeye_vision::tracker::StereoTrackerSet, min_score: f64) -> Option<View> {
-    let ok = |r: Role, v: View| {
-        matches!(states.get(r, v), Some(s) if s.is_tracking()) && trackers.get(r, v).is_some_and(|t| t.confidence().score >= min_score)
-    };
-    [View::Left, View::Right].into_iter().find(|&v| {
-        let other = if v == View::Left { View::Right } else { View::Left };
-        !ok(Role::Gripper, v) && !ok(Role::Target, v) && ok(Role::Gripper, other) && ok(Role::Target, other)
-    })
 }
 
 /// The daemon's state between frames.
@@ -74,10 +64,21 @@ pub struct HardLoop {
     failure: Option<Failure>,
     telemetry: Telemetry,
     stopped_at_frame: Option<u64>,
-    /// Re-acquiring one view after its camera moved (servo only).
+    /// Holding the arm while lost trackers are searched for.
     recovery: Option<Recovery>,
-    /// Camera knocks recovered from.
+    /// Losses recovered from, and the camera time the arm held for them, ns.
     recoveries: u32,
+    held_ns: u64,
+    /// Each tracker's last confident frame (by `recovery::slot_index`): where a search
+    /// for it starts.
+    last_good: [Option<LastGood>; 4],
+    /// Move commands a phase asked for while a tracker it needs was lost, turned into
+    /// holds where commands are stamped (a bug if ever non-zero; see `cycle`).
+    moves_refused: u64,
+    /// Each hold for lost trackers, for `daemon.json`; the one under way: its phase and the
+    /// frame id it began on.
+    losses: Vec<LossRecord>,
+    loss_began: (Phase, u64),
 }
 
 impl HardLoop {
@@ -103,6 +104,11 @@ impl HardLoop {
             stopped_at_frame: None,
             recovery: None,
             recoveries: 0,
+            held_ns: 0,
+            last_good: [None; 4],
+            moves_refused: 0,
+            losses: Vec::new(),
+            loss_began: (Phase::AcquireGripper, 0),
         })
     }
 
@@ -153,7 +159,10 @@ impl HardLoop {
         }
         let (states, update_ns) = self.mission.trackers.update_timed(left, right, tick.dt_s, monotonic_ns);
         self.telemetry.tracker_update_ns = update_ns;
+        self.note_good_frames(&states, tick.now_ns);
+        let phase_before = self.phase.phase();
         let cmd = self.decide(frame_index, frame_id, tick, left, right, states);
+        let cmd = self.refuse_blind_moves(cmd, phase_before, &states);
         let phase = self.phase.phase();
         if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
             self.phase_reached = phase;
@@ -192,42 +201,13 @@ impl HardLoop {
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
-        if let Some(rec) = self.recovery.as_mut() {
-            let other = if rec.view == View::Left { View::Right } else { View::Left };
-            let other_tracking = [Role::Gripper, Role::Target].iter().all(|&r| matches!(states.get(r, other), Some(s) if s.is_tracking()));
-            let image = if rec.view == View::Left { left } else { right };
-            match rec.step(&mut self.mission.trackers, image, other_tracking) {
-                RecoveryStep::Searching => return Cmd::HOLD,
-                RecoveryStep::Recovered { shift_px } => {
-                    tracing::warn!(?shift_px, view = ?rec.view, "trackers re-acquired after the camera moved");
-                    self.recoveries += 1;
-                    self.mission.reporting.snapshot("reacquired");
-                    let view = rec.view;
-                    if let PhaseState::Servo(p) = &mut self.phase {
-                        p.resume(&mut self.mission, view, shift_px);
-                    }
-                    self.recovery = None;
-                    return Cmd::HOLD;
-                }
-                RecoveryStep::Failed(reason) => {
-                    self.recovery = None;
-                    let detail = format!("camera moved, trackers not re-acquired: {reason}");
-                    self.stop_reason(Phase::Stopped, Fault::new(FailureKind::Camera, detail));
-                    return Cmd::STOP;
-                }
-            }
+        if self.recovery.is_some() {
+            return self.hold_and_search(phase, &states, tick.now_ns, left, right);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
-            // Both trackers of one view lost while the other view holds both: that camera
-            // moved. Stop the arm and try to re-acquire (servo only; elsewhere, stop).
-            if phase == Phase::Servo
-                && let Some(view) = moved_view(&states, &self.mission.trackers, self.mission.cfg.safety.min_tracker_score)
-                && let Some(rec) = Recovery::start(&self.mission.trackers, view, frame_index)
-            {
-                tracing::warn!(?view, reason = %fault, "a camera seems to have moved: stopping and re-acquiring");
-                self.recovery = Some(rec);
-                self.mission.reporting.set_status(if view == View::Left { "left camera moved: re-acquiring" } else { "right camera moved: re-acquiring" });
-                self.mission.reporting.snapshot("camera_moved");
+            // A tracker the phase needs is lost: hold the arm and search for it (unless
+            // holding is switched off).
+            if self.start_hold(phase, frame_id, tick.now_ns, &states) {
                 return Cmd::STOP;
             }
             self.stop_reason(Phase::Stopped, fault);
@@ -276,6 +256,7 @@ impl HardLoop {
                     t.tracker_state[i] = match states.get(role, view) {
                         Some(s) if s.is_tracking() => 1,
                         Some(_) => 2,
+                        None if self.recovery.as_ref().is_some_and(|r| r.is_searching(role, view)) => 2,
                         None if self.mission.trackers.is_active(role, view) => 1,
                         None => 0,
                     };
@@ -404,7 +385,7 @@ impl HardLoop {
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 stop_frame_id: self.stopped_at_frame(),
-                recoveries: self.recoveries(),
+                holds: HoldRecord { recoveries: self.recoveries(), held_s: self.held_s(), moves_refused: self.moves_refused(), losses: self.losses.clone() },
             },
             servo_trace: m.servo.trace().to_vec(),
             stale_frame_commands: 0, // counted by the service loop, which sees the stream
@@ -422,9 +403,19 @@ impl HardLoop {
         &self.mission
     }
 
-    /// Camera knocks the trackers recovered from.
+    /// Tracker losses recovered from (searched for and found again while the arm held).
     pub fn recoveries(&self) -> u32 {
         self.recoveries
+    }
+
+    /// Camera time the arm held for lost trackers, over the whole run, s.
+    pub fn held_s(&self) -> f64 {
+        self.held_ns as f64 * 1e-9
+    }
+
+    /// Moves refused because a tracker the phase needed was lost (see `refuse_blind_moves`).
+    pub fn moves_refused(&self) -> u64 {
+        self.moves_refused
     }
 
     /// The configuration the loop runs with.

@@ -1,0 +1,194 @@
+//! Holding the arm for lost trackers, from the hard loop's side: which trackers a phase has
+//! lost, starting a [`Recovery`] and stepping it, resuming the phase or ending the run, the
+//! per-loss record, and the one check every command passes before it is stamped (never a
+//! move on a lost track).
+
+use handeye_vision::image::ImageView;
+use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
+use handeye_wire::report::FailureKind;
+use handeye_wire::Phase;
+
+use super::HardLoop;
+use crate::config::SafetyConfig;
+use crate::fault::Fault;
+use crate::outcome::LossRecord;
+use crate::phase::Cmd;
+use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
+use crate::safety::{check_trackers, needs_trackers};
+
+/// The trackers `phase` needs that are lost or below their confidence this cycle (active
+/// ones only), with what is wrong with each.
+fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, String)> {
+    let (gripper, target) = needs_trackers(phase);
+    let mut lost = Vec::new();
+    for (role, needed) in [(Role::Gripper, gripper), (Role::Target, target)] {
+        for view in View::ALL {
+            if !needed || !trackers.is_active(role, view) {
+                continue;
+            }
+            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
+            let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
+            match states.get(role, view) {
+                Some(TrackState::Lost(why)) => lost.push((role, view, why.to_string())),
+                None => lost.push((role, view, "did not run".to_string())),
+                Some(TrackState::Tracking) if score.is_nan() || score < min => lost.push((role, view, format!("confidence {score:.2} < {min}"))),
+                Some(TrackState::Tracking) => {}
+            }
+        }
+    }
+    lost
+}
+
+impl HardLoop {
+    /// Remembers each confidently tracking contour's frame: a later search starts there
+    /// rather than where a contour drifted to while it was being lost.
+    pub(super) fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
+        let cfg = &self.mission.cfg.safety;
+        for role in [Role::Gripper, Role::Target] {
+            let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
+            for view in View::ALL {
+                let Some(t) = self.mission.trackers.get(role, view) else { continue };
+                let score = t.confidence().score;
+                if matches!(states.get(role, view), Some(TrackState::Tracking)) && score >= min {
+                    self.last_good[slot_index(role, view)] = Some(LastGood { frame: t.frame(), time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
+                }
+            }
+        }
+    }
+
+    /// The one place every command passes before it is stamped: a move while a tracker the
+    /// phase that asked for it needs is lost, unsure, or being searched for never goes out
+    /// (it becomes a hold, and is counted and logged as the bug it would be).
+    pub(super) fn refuse_blind_moves(&mut self, cmd: Cmd, phase: Phase, states: &StereoStates) -> Cmd {
+        if !cmd.is_move() {
+            return cmd;
+        }
+        let blind = if self.recovery.is_some() {
+            Err(Fault::new(FailureKind::TrackerLost, "holding for a lost tracker"))
+        } else {
+            check_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers)
+        };
+        match blind {
+            Ok(()) => cmd,
+            Err(why) => {
+                self.moves_refused += 1;
+                tracing::error!(phase = phase.name(), reason = %why, "a move was asked for on a lost track: holding instead");
+                Cmd::HOLD
+            }
+        }
+    }
+
+    /// A tracker `phase` needs is lost (the safety check failed): stops the arm and starts
+    /// searching, unless holding is switched off (`safety.loss_patience_s` = 0) or nothing
+    /// searchable was lost; `false` then (the caller ends the run).
+    pub(super) fn start_hold(&mut self, phase: Phase, frame_id: u64, now_ns: u64, states: &StereoStates) -> bool {
+        let lost = lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers);
+        let patience_s = self.mission.cfg.safety.loss_patience_s;
+        if patience_s > 0.0 && !lost.is_empty() {
+            let cfg = &self.mission.cfg.safety;
+            let min_scores = [cfg.min_tracker_score, cfg.min_target_score];
+            let rec = Recovery::start(&mut self.mission.trackers, &lost, &self.last_good, now_ns, patience_s, min_scores);
+            let what = rec.what();
+            tracing::warn!(phase = phase.name(), %what, "tracker lost: holding the arm and searching");
+            // Both contours of one view at once: that camera has most likely moved.
+            let moved = View::ALL.into_iter().find(|&v| [Role::Gripper, Role::Target].iter().all(|&r| lost.iter().any(|l| l.0 == r && l.1 == v)));
+            match moved {
+                Some(View::Left) => self.mission.reporting.set_status("left camera moved: holding, re-acquiring"),
+                Some(View::Right) => self.mission.reporting.set_status("right camera moved: holding, re-acquiring"),
+                None => self.mission.reporting.set_status(&format!("holding: {what}; searching")),
+            }
+            self.mission.reporting.snapshot(if moved.is_some() { "camera_moved" } else { "lost" });
+            self.recovery = Some(rec);
+            self.loss_began = (phase, frame_id);
+            return true;
+        }
+        false
+    }
+
+    /// A cycle while holding for lost trackers: contours the phase needs that are lost now
+    /// join the search; the search runs; the phase resumes when all are back, the run stops
+    /// when the patience is spent.
+    pub(super) fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
+        let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
+        for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
+            rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);
+        }
+        let epipolar = self.mission.calibration.get().map(|cal| EpipolarCheck {
+            constraint: cal.model.epipolar(),
+            tol_px: 2.0 * self.mission.cfg.target.max_epipolar_px,
+        });
+        match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
+            RecoveryStep::Searching => Cmd::HOLD,
+            RecoveryStep::Recovered { knock, held_s, shifts_px } => {
+                tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
+                let held_ns = now_ns.saturating_sub(rec.start_ns());
+                let (p, frame_id) = self.loss_began;
+                let outcome = if knock.is_some() { "recovered (a camera moved)" } else { "recovered" };
+                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: outcome.into(), shifts_px });
+                self.recovery = None;
+                self.recoveries += 1;
+                self.held_ns += held_ns;
+                self.mission.reporting.snapshot("reacquired");
+                self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                Cmd::HOLD
+            }
+            RecoveryStep::Failed(reason) => {
+                let (p, frame_id) = self.loss_began;
+                let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
+                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: reason.to_string(), shifts_px: [None; 4] });
+                self.recovery = None;
+                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
+                Cmd::STOP
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::image::ImageBuf;
+    use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+
+    /// A dark square on a light ground, and a loop whose four trackers sit on it.
+    fn tracking_loop() -> (HardLoop, ImageBuf) {
+        let mut img = ImageBuf::filled(160, 120, 200);
+        for y in 40..80 {
+            for x in 60..100 {
+                img.set(x, y, 50);
+            }
+        }
+        let square = [[59.5, 39.5], [99.5, 39.5], [99.5, 79.5], [59.5, 79.5]];
+        let mut hl = HardLoop::new(crate::config::DaemonConfig::default(), None).unwrap();
+        for role in [Role::Gripper, Role::Target] {
+            for v in View::ALL {
+                hl.mission.trackers.insert(role, v, ContourTracker::new(TrackerConfig::default(), &square).unwrap());
+            }
+        }
+        (hl, img)
+    }
+
+    #[test]
+    fn a_move_on_a_lost_or_searched_track_becomes_a_hold() {
+        let (mut hl, img) = tracking_loop();
+        let go = Cmd::move_by([0.01, 0.0, 0.0], 0.0, 0.05);
+        let states = hl.mission.trackers.update(&img.view(), &img.view(), 0.03);
+        // Everything tracks: the servo's move goes out.
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Servo, &states), go);
+        // The right view goes blank (both its trackers lost): the servo may not move.
+        let blank = ImageBuf::filled(160, 120, 200);
+        let (s_left, s_right) = (img.view(), blank.view());
+        let states = hl.mission.trackers.update(&s_left, &s_right, 0.03);
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Servo, &states), Cmd::HOLD);
+        assert_eq!(hl.moves_refused(), 1);
+        // A hold or a stop always passes.
+        assert_eq!(hl.refuse_blind_moves(Cmd::STOP, Phase::Servo, &states), Cmd::STOP);
+        // While lost trackers are searched for, no move goes out in any phase.
+        let lost = lost_trackers(&hl.mission.cfg.safety, Phase::Servo, &states, &hl.mission.trackers);
+        assert!(!lost.is_empty() && lost.iter().all(|l| l.1 == View::Right), "{lost:?}");
+        assert!(hl.start_hold(Phase::Servo, 7, 0, &states));
+        assert!(hl.recovery.as_ref().is_some_and(|r| r.is_searching(Role::Target, View::Right)));
+        assert_eq!(hl.refuse_blind_moves(go, Phase::Calibrate, &states), Cmd::HOLD);
+        assert_eq!(hl.moves_refused(), 2);
+    }
+}
