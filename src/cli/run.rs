@@ -93,6 +93,10 @@ pub struct RunArgs {
     /// `handeye sim --help` and scenarios/random.toml).
     #[arg(long, requires = "seed", conflicts_with = "random_layout")]
     randomize: bool,
+    /// With --seed: one seeded random disturbance at a random moment (a camera knock, a
+    /// target nudge, a light change or an occluder; see `handeye sim --help`).
+    #[arg(long, requires = "seed")]
+    disturb: bool,
     /// Give the daemon the operator hint (the target facet clicked in both views) instead of
     /// letting it plan its own grasp.
     #[arg(long)]
@@ -258,10 +262,13 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         if args.randomize {
             sim_args.push("--randomize".into());
         }
+        if args.disturb {
+            sim_args.push("--disturb".into());
+        }
     }
     // The indicated point as the simulator will lay the scene out (the same seeded code).
     let mut laid_out = scenario.clone();
-    super::sim::lay_out(&mut laid_out, &args.scenario, args.seed, args.random_layout, args.randomize)?;
+    super::sim::lay_out(&mut laid_out, &args.scenario, args.seed, args.random_layout, args.randomize, args.disturb)?;
     let point = laid_out.indicated_point_m();
     let mut sim = spawn("sim", &sim_args, dir)?;
     let deadline = start + Duration::from_secs_f64(args.timeout_s);

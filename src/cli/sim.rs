@@ -83,6 +83,11 @@ pub struct SimArgs {
     /// indicated point (see scenarios/random.toml). What `handeye batch --randomize` runs.
     #[arg(long, requires = "seed", conflicts_with = "random_layout")]
     randomize: bool,
+    /// With --seed: add one seeded random disturbance at a random moment (6-30 s): a camera
+    /// knocked 1.5-3°, the target nudged 20-30 mm and 10-20°, the light scaled 0.7-1.3, or a
+    /// box crossing between the cameras and the target. What `handeye batch --disturb` runs.
+    #[arg(long, requires = "seed")]
+    disturb: bool,
     /// Write the operator hint for the target (its best graspable facet in both views, each
     /// corner off by up to ±3 px, and the depth behind it ±2 mm; seeded) to this JSON file
     /// before the first frame, for `handeye daemon --hint`. When the target has no such facet
@@ -146,8 +151,18 @@ pub fn quiet_mesa() {
 /// The scenario as a run with `--seed` lays it out: the target moved a little, every block
 /// laid out afresh (`--random-layout`), or a whole work cell drawn (`--randomize`). One
 /// function for `handeye sim` and `handeye run`, which must agree on the indicated point.
-pub fn lay_out(scenario: &mut Scenario, file: &std::path::Path, seed: Option<u64>, random_layout: bool, randomize: bool) -> Result<()> {
+pub fn lay_out(scenario: &mut Scenario, file: &std::path::Path, seed: Option<u64>, random_layout: bool, randomize: bool, disturb: bool) -> Result<()> {
     let Some(seed) = seed else { return Ok(()) };
+    lay_out_blocks(scenario, file, seed, random_layout, randomize)?;
+    if disturb {
+        // After the layout: the event is drawn from the cell's own cameras, target and light.
+        let event = scenario.add_random_disturbance(seed);
+        tracing::info!(?event, "disturbance added");
+    }
+    Ok(())
+}
+
+fn lay_out_blocks(scenario: &mut Scenario, file: &std::path::Path, seed: u64, random_layout: bool, randomize: bool) -> Result<()> {
     if randomize {
         scenario.randomise_cell(seed).with_context(|| format!("{}: seed {seed}", file.display()))?;
     } else if random_layout {
@@ -171,7 +186,7 @@ pub fn no_hint_path(hint_path: &std::path::Path) -> PathBuf {
 pub fn run(args: SimArgs) -> Result<()> {
     quiet_mesa();
     let mut scenario = Scenario::load(&args.scenario)?;
-    lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize)?;
+    lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize, args.disturb)?;
     let name = scenario.name.clone();
     let mut runner = Runner::new(Simulator::new(scenario)?).context("starting the renderer")?;
     let robot = if args.robot == RobotArg::External { RobotSide::External } else { RobotSide::Simulated };
@@ -298,6 +313,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             ),
             daemon: runner.watch.clone(),
             pointer: runner.sim.pointer.as_ref().map(|p| p.truth(&runner.sim.events.cameras, runner.sim.now_ns())),
+            events: scenario.events.iter().map(|e| e.summary()).collect(),
         };
         if let Some(path) = &args.verdict_out {
             // Write then rename, so that `handeye run` never reads half a report.

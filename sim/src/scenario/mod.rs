@@ -6,6 +6,7 @@
 //!   the file a problem is ([`ScenarioError`]: `file:line:column: field.path: message`);
 //! - `shades`: every block face's albedo, as written or seeded;
 //! - `layout`: seeded random layouts of the scenario's own blocks, for batches;
+//! - `disturb`: one seeded random disturbance per run (`--disturb`);
 //! - `cell_draw`: whole random work cells from the `[randomize]` ranges (cameras, light,
 //!   shades, blocks, noise), whose physical checks use the renderer's camera model
 //!   ([`crate::render::camera`]), the arm's reach ([`crate::cell::kinematics`]) and the block
@@ -16,6 +17,7 @@
 
 mod cell_draw;
 mod config;
+mod disturb;
 mod error;
 mod layout;
 mod load;

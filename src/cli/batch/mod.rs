@@ -87,6 +87,7 @@ mod summary;
 ///   handeye batch --randomize --seeds 50 --json             # randomised work cells
 ///   handeye batch --randomize --seeds 20 --first-seed 1000 --out out/cells
 ///   handeye batch scenarios/random.toml --randomize --seeds 5   # its own [randomize] ranges
+///   handeye batch scenarios/clutter3.toml --seeds 30 --disturb  # one random disturbance a run
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --config fast.toml   # other daemon settings
@@ -126,6 +127,10 @@ pub struct BatchArgs {
     /// out the scenario's own blocks.
     #[arg(long)]
     randomize: bool,
+    /// Add one seeded random disturbance to every run (`handeye run --disturb`): a camera
+    /// knock, a target nudge, a light change or an occluder, at a random moment.
+    #[arg(long)]
+    disturb: bool,
     /// Give the daemon the operator hint instead of letting it plan (`handeye run --hint`).
     #[arg(long)]
     hint: bool,
@@ -186,6 +191,9 @@ fn run_flags(args: &BatchArgs) -> Vec<String> {
     let mut flags: Vec<String> = vec![layout.into(), "--json".into(), "--timeout-s".into(), args.timeout_s.to_string()];
     if args.hint {
         flags.push("--hint".into());
+    }
+    if args.disturb {
+        flags.push("--disturb".into());
     }
     if let Some(config) = &args.config {
         flags.extend(["--config".into(), config.display().to_string()]);
