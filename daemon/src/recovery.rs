@@ -3,7 +3,8 @@
 //! phase that needs one (calibrate, plan, acquire_target, servo), starts a recovery instead
 //! of ending the run: the hard loop stops the arm and holds it; each lost contour is searched
 //! for with [`crate::track_search`] over a grid of image translations of its **last good**
-//! template frame (the frame it last tracked confidently, before it drifted off), centred in
+//! template frame (the frame it last tracked confidently, before it drifted off, with a shape
+//! steady and its own: `hard_loop/shape_watch.rs`), centred in
 //! turn on where it was and where its filter's velocity predicts it, the grid widening with
 //! every pass that found nothing (±40, ±80, then ±160 px, repeated). A candidate must pass
 //! the acquisition's verification (the tracker's confidence, its area within ±11 % of the
@@ -212,6 +213,7 @@ impl Recovery {
             return;
         }
         let Some(tracker) = trackers.get(role, view) else { return };
+        tracing::debug!(who = %name(role, view), why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
         let (base, lost_ns, velocity_px_s) = match last_good[slot_index(role, view)] {
             Some(g) => (g.frame, g.time_ns, Vector2::from(g.velocity_px_s)),
             None => (tracker.frame(), now_ns, Vector2::zeros()),
@@ -300,7 +302,8 @@ impl Recovery {
             match slot.search.step_where(base, image, |cand| plausible(cand, role, view, set, epipolar)) {
                 SearchStep::Searching => {}
                 SearchStep::Done(Some(best)) if best.score >= min => {
-                    let frame = ShiftSearch::shifted(&slot.base, best.shift_px);
+                    tracing::debug!(who = %name(role, view), score = best.score, shift = ?best.shift_px, "candidate taken");
+                    let frame = best.frame;
                     slot.found = Some(best.shift_px);
                     self.best_score = self.best_score.max(best.score);
                     if let Some(t) = trackers.get_mut(role, view) {
@@ -309,6 +312,7 @@ impl Recovery {
                     }
                 }
                 SearchStep::Done(best) => {
+                    tracing::debug!(who = %name(role, view), passes = slot.passes, best = ?best, min, "search pass: nothing good enough");
                     self.best_score = self.best_score.max(best.map_or(0.0, |b| b.score));
                     slot.passes += 1;
                     // Alternately around where it was and where its motion predicts it.
@@ -337,6 +341,9 @@ impl Recovery {
             let (role, view) = (self.slots[i].role, self.slots[i].view);
             if !self.holds(trackers, role, view) {
                 relapsed = true;
+                if let Some(t) = trackers.get(role, view) {
+                    tracing::debug!(who = %name(role, view), frames, state = ?t.state(), score = t.confidence().score, "re-found contour did not hold");
+                }
                 let s = &mut self.slots[i];
                 s.found = None;
                 s.passes = 0;

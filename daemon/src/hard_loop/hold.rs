@@ -41,16 +41,20 @@ fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, tracke
 
 impl HardLoop {
     /// Remembers each confidently tracking contour's frame: a later search starts there
-    /// rather than where a contour drifted to while it was being lost.
+    /// rather than where a contour drifted to while it was being lost, and only from a frame
+    /// whose shape was steady and the contour's own ([`super::shape_watch::ShapeWatch`]).
     pub(super) fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
         let cfg = &self.mission.cfg.safety;
         for role in [Role::Gripper, Role::Target] {
             let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
             for view in View::ALL {
+                let i = slot_index(role, view);
                 let Some(t) = self.mission.trackers.get(role, view) else { continue };
-                let score = t.confidence().score;
-                if matches!(states.get(role, view), Some(TrackState::Tracking)) && score >= min {
-                    self.last_good[slot_index(role, view)] = Some(LastGood { frame: t.frame(), time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
+                let tracking = matches!(states.get(role, view), Some(TrackState::Tracking));
+                let frame = t.frame();
+                let shape_ok = self.shapes[i].observe(frame, t.update_count(), tracking);
+                if tracking && shape_ok && t.confidence().score >= min {
+                    self.last_good[i] = Some(LastGood { frame, time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
                 }
             }
         }

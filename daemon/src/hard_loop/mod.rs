@@ -19,6 +19,9 @@ use handeye_wire::{
 };
 
 mod hold;
+mod shape_watch;
+
+use shape_watch::ShapeWatch;
 
 use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
 use crate::config::DaemonConfig;
@@ -72,6 +75,8 @@ pub struct HardLoop {
     /// Each tracker's last confident frame (by `recovery::slot_index`): where a search
     /// for it starts.
     last_good: [Option<LastGood>; 4],
+    /// Each tracker's shape history: which of its frames may be a search base.
+    shapes: [ShapeWatch; 4],
     /// Move commands a phase asked for while a tracker it needs was lost, turned into
     /// holds where commands are stamped (a bug if ever non-zero; see `cycle`).
     moves_refused: u64,
@@ -106,6 +111,7 @@ impl HardLoop {
             recoveries: 0,
             held_ns: 0,
             last_good: [None; 4],
+            shapes: [ShapeWatch::default(); 4],
             moves_refused: 0,
             losses: Vec::new(),
             loss_began: (Phase::AcquireGripper, 0),
