@@ -234,6 +234,11 @@ impl Recovery {
         self.start_ns
     }
 
+    /// Search passes over the grid so far (the most of any lost contour).
+    pub fn passes(&self) -> u32 {
+        self.slots.iter().map(|s| s.passes).max().unwrap_or(0)
+    }
+
     /// Contours re-found that then did not hold while confirming.
     pub fn relapses(&self) -> u32 {
         self.relapses

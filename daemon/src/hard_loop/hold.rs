@@ -128,18 +128,31 @@ impl HardLoop {
                 let held_ns = now_ns.saturating_sub(rec.start_ns());
                 let (p, frame_id) = self.loss_began;
                 let outcome = if knock.is_some() { "recovered (a camera moved)" } else { "recovered" };
-                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: outcome.into(), shifts_px });
+                let (what, search_passes, relapses) = (rec.what(), rec.passes(), rec.relapses());
                 self.recovery = None;
                 self.recoveries += 1;
                 self.held_ns += held_ns;
                 self.mission.reporting.snapshot("reacquired");
-                self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let record = LossRecord { phase: p.name().into(), frame_id, what, held_s, outcome: outcome.into(), shifts_px, resumed: resumed.to_string(), search_passes, relapses };
+                self.losses.push(record);
                 Cmd::HOLD
             }
             RecoveryStep::Failed(reason) => {
                 let (p, frame_id) = self.loss_began;
                 let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
-                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: reason.to_string(), shifts_px: [None; 4] });
+                let (search_passes, relapses) = (rec.passes(), rec.relapses());
+                self.losses.push(LossRecord {
+                    phase: p.name().into(),
+                    frame_id,
+                    what: rec.what(),
+                    held_s,
+                    outcome: reason.to_string(),
+                    shifts_px: [None; 4],
+                    resumed: String::new(),
+                    search_passes,
+                    relapses,
+                });
                 self.recovery = None;
                 self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
                 Cmd::STOP

@@ -391,7 +391,13 @@ impl HardLoop {
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 stop_frame_id: self.stopped_at_frame(),
-                holds: HoldRecord { recoveries: self.recoveries(), held_s: self.held_s(), moves_refused: self.moves_refused(), losses: self.losses.clone() },
+                holds: HoldRecord {
+                    recoveries: self.recoveries(),
+                    held_s: self.held_s(),
+                    moves_refused: self.moves_refused(),
+                    losses: self.losses.clone(),
+                    recalibrations: m.calibration.recalibrations(),
+                },
             },
             servo_trace: m.servo.trace().to_vec(),
             stale_frame_commands: 0, // counted by the service loop, which sees the stream

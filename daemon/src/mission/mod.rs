@@ -56,6 +56,22 @@ impl Mission {
         })
     }
 
+    /// A camera moved after the calibration (`view`, its image shifted by about `shift_px`):
+    /// the calibration is made again, so what was worked out in the old camera's pixels goes:
+    /// the target's trackers, and a planned target with its alternatives (the scene is planned
+    /// again). An operator hint's outline in the moved view is shifted with the image (the
+    /// operator clicked the old view).
+    pub fn camera_moved(&mut self, view: View, shift_px: [f64; 2]) {
+        for v in View::ALL {
+            self.trackers.remove(Role::Target, v);
+        }
+        self.targeting.camera_moved(view, shift_px);
+        self.calibration.note_camera_moved();
+        let side = if view == View::Left { "left" } else { "right" };
+        self.reporting.set_status(&format!("{side} camera moved after the calibration: calibrating again"));
+        self.reporting.snapshot("camera_moved");
+    }
+
     /// Gives up the current target (removing its trackers) for the plan's next grasp site;
     /// `false` when there is none left.
     pub fn next_target(&mut self, why: &str) -> bool {

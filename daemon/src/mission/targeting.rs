@@ -87,6 +87,24 @@ impl Targeting {
         self.target = Some(target);
     }
 
+    /// A camera moved and is being calibrated again: a planned target and its alternatives
+    /// are forgotten (planned again with the new calibration); a hint's outline in `view` is
+    /// shifted by `shift_px` with the image.
+    pub fn camera_moved(&mut self, view: handeye_vision::tracker::View, shift_px: [f64; 2]) {
+        self.alternatives.clear();
+        match &mut self.target {
+            Some(t) if t.source == TargetSource::Hint => {
+                let px = if view == handeye_vision::tracker::View::Left { &mut t.left_px } else { &mut t.right_px };
+                for p in px.iter_mut() {
+                    p[0] += shift_px[0];
+                    p[1] += shift_px[1];
+                }
+                t.site_template = None;
+            }
+            _ => self.target = None,
+        }
+    }
+
     /// The plan's other grasp sites, next best first.
     pub fn set_alternatives(&mut self, alternatives: Vec<TargetSpec>) {
         self.alternatives = alternatives;
