@@ -234,6 +234,17 @@ impl Recovery {
         self.start_ns
     }
 
+    /// Whether the contour in this slot is being searched for or confirmed (its frames are
+    /// not known good until the recovery ends).
+    pub fn holds_for(&self, role: Role, view: View) -> bool {
+        self.slots.iter().any(|s| s.role == role && s.view == view)
+    }
+
+    /// Whether every contour searched for is `role`'s.
+    pub fn only(&self, role: Role) -> bool {
+        self.slots.iter().all(|s| s.role == role)
+    }
+
     /// Search passes over the grid so far (the most of any lost contour).
     pub fn passes(&self) -> u32 {
         self.slots.iter().map(|s| s.passes).max().unwrap_or(0)

@@ -16,6 +16,19 @@ use crate::phase::Cmd;
 use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
 use crate::safety::{check_trackers, needs_trackers};
 
+/// Camera time a target lost in the servo (and nothing else) is searched for before the
+/// scene is planned again from a fresh pair, s: a target turned by a nudge does not come back
+/// by a shifted search, and an occluder crossing it has passed by then (they cross in 1-2 s).
+pub const TARGET_SEARCH_S: f64 = 4.0;
+/// A target displacement measured larger than this is not believed (the indicated point
+/// stays), m.
+const MAX_TARGET_MOVE_M: f64 = 0.1;
+/// ... nor one with a height change over this (a block slides on the table), m ...
+const MAX_TARGET_RISE_M: f64 = 0.01;
+/// ... nor one from views last tracked this far apart in time (one view followed the block a
+/// while, the other did not: the pair is not one moment), ns.
+const MAX_VIEW_SKEW_NS: u64 = 100_000_000;
+
 /// The trackers `phase` needs that are lost or below their confidence this cycle (active
 /// ones only), with what is wrong with each.
 fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, String)> {
@@ -41,7 +54,8 @@ fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, tracke
 
 impl HardLoop {
     /// Remembers each confidently tracking contour's frame: a later search starts there
-    /// rather than where a contour drifted to while it was being lost, and only from a frame
+    /// rather than where a contour drifted to while it was being lost (nor from a candidate still
+    /// being confirmed), and only from a frame
     /// whose shape was steady and the contour's own ([`super::shape_watch::ShapeWatch`]).
     pub(super) fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
         let cfg = &self.mission.cfg.safety;
@@ -50,6 +64,11 @@ impl HardLoop {
             for view in View::ALL {
                 let i = slot_index(role, view);
                 let Some(t) = self.mission.trackers.get(role, view) else { continue };
+                if self.recovery.as_ref().is_some_and(|r| r.holds_for(role, view)) {
+                    // A candidate being confirmed is not known good: a search after a relapse
+                    // starts from the frame before the loss, not from the candidate.
+                    continue;
+                }
                 let tracking = matches!(states.get(role, view), Some(TrackState::Tracking));
                 let frame = t.frame();
                 let shape_ok = self.shapes[i].observe(frame, t.update_count(), tracking);
@@ -109,10 +128,54 @@ impl HardLoop {
         false
     }
 
+    /// How far the target moved on the table (x, y, m) between its acquisition and the last
+    /// frame its trackers held it confidently in both views, through the stereo model; zero
+    /// when unknown.
+    fn target_moved_m(&self) -> [f64; 2] {
+        let (Some(acquired), Some(cal)) = (self.mission.targeting.acquired_px(), self.mission.calibration.get()) else { return [0.0; 2] };
+        let (Some(l), Some(r)) = (self.last_good[slot_index(Role::Target, View::Left)], self.last_good[slot_index(Role::Target, View::Right)]) else {
+            return [0.0; 2];
+        };
+        let now = [l.frame.origin.x, l.frame.origin.y, r.frame.origin.x, r.frame.origin.y];
+        let d = cal.model.reconstruct(&now) - cal.model.reconstruct(&acquired);
+        let skew_ns = l.time_ns.abs_diff(r.time_ns);
+        tracing::debug!(?acquired, ?now, moved_m = ?d, skew_ns, "target's last tracked displacement");
+        if !(d.x.is_finite() && d.y.is_finite()) || d.x.hypot(d.y) > MAX_TARGET_MOVE_M || d.z.abs() > MAX_TARGET_RISE_M || skew_ns > MAX_VIEW_SKEW_NS {
+            return [0.0; 2];
+        }
+        [d.x, d.y]
+    }
+
+    /// The servo's target (and nothing else) lost for [`TARGET_SEARCH_S`]: plans the scene
+    /// again from a fresh pair (the arm parked in view), the indicated point moved with the
+    /// target's last tracked displacement; `false` when not due or not allowed.
+    fn replan_for_lost_target(&mut self, phase: Phase, now_ns: u64) -> bool {
+        let Some(rec) = self.recovery.as_ref() else { return false };
+        if phase != Phase::Servo || !rec.only(Role::Target) || !crate::phase::timed_out(rec.start_ns(), now_ns, TARGET_SEARCH_S) {
+            return false;
+        }
+        let (what, start_ns, search_passes, relapses) = (rec.what(), rec.start_ns(), rec.passes(), rec.relapses());
+        let outcome = format!("not found again within {TARGET_SEARCH_S:.1} s");
+        let moved_m = self.target_moved_m();
+        if !self.phase.replan(&mut self.mission, now_ns, &format!("{what}; {outcome}"), moved_m) {
+            return false;
+        }
+        let held_ns = now_ns.saturating_sub(start_ns);
+        let (p, frame_id) = self.loss_began;
+        let resumed = format!("planning again from a fresh pair; indicated point moved {:.0} mm with the target's last tracked position", moved_m[0].hypot(moved_m[1]) * 1e3);
+        self.losses.push(LossRecord { phase: p.name().into(), frame_id, what, held_s: held_ns as f64 * 1e-9, outcome, shifts_px: [None; 4], resumed, search_passes, relapses });
+        self.recovery = None;
+        self.held_ns += held_ns;
+        true
+    }
+
     /// A cycle while holding for lost trackers: contours the phase needs that are lost now
     /// join the search; the search runs; the phase resumes when all are back, the run stops
     /// when the patience is spent.
     pub(super) fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
+        if self.replan_for_lost_target(phase, now_ns) {
+            return Cmd::HOLD;
+        }
         let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
         for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
             rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);

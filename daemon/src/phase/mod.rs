@@ -105,6 +105,17 @@ impl PhaseState {
         }
     }
 
+    /// Goes back to the plan phase for a target that was lost and not found again, or could
+    /// not be acquired (`why`), if the mission allows it ([`Mission::replan`]; the indicated
+    /// point moves by `moved_m` with the target). Only from acquire_target and the servo.
+    pub fn replan(&mut self, m: &mut Mission, now_ns: u64, why: &str, moved_m: [f64; 2]) -> bool {
+        if !matches!(self, Self::AcquireTarget(_) | Self::Servo(_)) || !m.replan(why, moved_m) {
+            return false;
+        }
+        *self = Self::Plan(plan::PlanPhase::new(now_ns));
+        true
+    }
+
     /// Runs the current phase for one cycle; on `Next` builds the following phase.
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let step = match self {
@@ -117,13 +128,18 @@ impl PhaseState {
             Self::Lift(p) => p.step(m, c),
             Self::Done { .. } | Self::Failed | Self::Stopped => return Step::Stay(Cmd::HOLD),
         };
-        // A target that cannot be acquired or served: the plan's next grasp site, if any.
+        // A target that cannot be acquired or served: the plan's next grasp site, if any, else
+        // the scene planned again from a fresh pair (it may have moved).
         if let Step::Fail(fault) = &step
             && matches!(self, Self::AcquireTarget(_))
-            && m.next_target(&fault.detail)
         {
-            *self = Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns));
-            return Step::Stay(Cmd::HOLD);
+            if m.next_target(&fault.detail) {
+                *self = Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns));
+                return Step::Stay(Cmd::HOLD);
+            }
+            if self.replan(m, c.time_ns, &fault.detail, [0.0; 2]) {
+                return Step::Stay(Cmd::HOLD);
+            }
         }
         if let Step::Next(_) = step {
             *self = match self {
@@ -135,6 +151,7 @@ impl PhaseState {
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),
                     Err(fault) if m.next_target(&fault.detail) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
+                    Err(fault) if m.replan(&fault.detail, [0.0; 2]) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
                     Err(fault) => return Step::Fail(fault),
                 },
                 Self::Servo(p) => Self::Grasp(grasp::Grasp::new(c.time_ns, p.approach_m)),
@@ -201,5 +218,34 @@ mod tests {
         let t = m.targeting.target().expect("the hint stays the target");
         assert_eq!(t.left_px[0], [120.0, 70.0]);
         assert_eq!(t.right_px, square(90.0));
+    }
+
+    #[test]
+    fn a_lost_planned_target_is_planned_again_with_the_point_moved_and_only_so_often() {
+        let mut m = mission(None);
+        m.targeting.set_indicated_m(Some([0.40, 0.02, 0.06]));
+        m.targeting.set_target(planned());
+        let mut phase = PhaseState::AcquireTarget(acquire_target::AcquireTarget::new(0));
+        assert!(phase.replan(&mut m, 1, "target tracker (Right) confidence 0.00 < 0.45", [0.02, -0.01]));
+        assert_eq!(phase.phase(), Phase::Plan);
+        assert!(m.targeting.target().is_none() && View::ALL.iter().all(|&v| m.trackers.get(Role::Target, v).is_none()));
+        let p = m.targeting.indicated_m().unwrap();
+        assert!((p[0] - 0.42).abs() < 1e-12 && (p[1] - 0.01).abs() < 1e-12 && p[2] == 0.06, "{p:?}");
+        // Not from the plan phase itself, and at most MAX_REPLANS a run.
+        assert!(!phase.replan(&mut m, 2, "again", [0.0; 2]));
+        for k in 1..crate::mission::MAX_REPLANS {
+            m.targeting.set_target(planned());
+            let mut phase = PhaseState::AcquireTarget(acquire_target::AcquireTarget::new(0));
+            assert!(phase.replan(&mut m, 3, "again", [0.0; 2]), "re-plan {k}");
+        }
+        m.targeting.set_target(planned());
+        let mut phase = PhaseState::AcquireTarget(acquire_target::AcquireTarget::new(0));
+        assert!(!phase.replan(&mut m, 4, "once too often", [0.0; 2]));
+        assert_eq!(phase.phase(), Phase::AcquireTarget);
+        // An operator hint names one facet: nothing to plan again.
+        let hint = OperatorHint { version: handeye_wire::hint::HINT_VERSION, left_px: square(100.0), right_px: square(90.0), depth_mm: 30.0, note: String::new() };
+        let mut m = mission(Some(&hint));
+        m.targeting.set_indicated_m(Some([0.40, 0.02, 0.06]));
+        assert!(!phase.replan(&mut m, 5, "hint", [0.0; 2]));
     }
 }
