@@ -11,7 +11,9 @@
 //! template's); when every lost contour is back, all must track confidently for
 //! [`CONFIRM_FRAMES`] frames (the target's outline refined from its edges halfway, as at
 //! acquisition) before the phase resumes from fresh frames. After `safety.loss_patience_s`
-//! of camera time the run fails, naming what was lost, why, and how the search went.
+//! of camera time the run fails, naming what was lost, why, and how the search went. A plate
+//! the search does not find is located by the jaws' motion instead (the hard loop drives
+//! that, `hard_loop/hold.rs`; [`Recovery::plates_found_by_jaws`]).
 //!
 //! A camera knocked is the special case where both contours of one view are lost at once:
 //! the plate (the highest-contrast contour) is searched for and the target follows it by
@@ -76,6 +78,8 @@ struct Slot {
 /// The state of one hold-and-search.
 pub struct Recovery {
     start_ns: u64,
+    /// Camera time not counted against the patience (the jaws opening and closing), ns.
+    excused_ns: u64,
     patience_s: f64,
     min_scores: [f64; 2],
     slots: Vec<Slot>,
@@ -83,6 +87,8 @@ pub struct Recovery {
     best_score: f64,
     /// Contours re-found that then did not hold, and searched for again.
     relapses: u32,
+    /// The plate was located by the jaws' motion, not by the search.
+    by_jaws: bool,
 }
 
 /// What a recovery cycle concluded.
@@ -199,7 +205,7 @@ impl Recovery {
         patience_s: f64,
         min_scores: [f64; 2],
     ) -> Self {
-        let mut r = Self { start_ns: now_ns, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0 };
+        let mut r = Self { start_ns: now_ns, excused_ns: 0, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0, by_jaws: false };
         for (role, view, why) in lost {
             r.add(trackers, *role, *view, why, last_good, now_ns);
         }
@@ -232,6 +238,34 @@ impl Recovery {
     /// When the hold began, camera ns.
     pub fn start_ns(&self) -> u64 {
         self.start_ns
+    }
+
+    /// Camera time that does not count against the patience (the jaws located the plate
+    /// meanwhile: the search did not run).
+    pub fn excuse(&mut self, ns: u64) {
+        self.excused_ns = self.excused_ns.saturating_add(ns);
+    }
+
+    /// Whether a plate is still being searched for (not found yet).
+    pub fn plate_missing(&self) -> bool {
+        self.slots.iter().any(|s| s.role == Role::Gripper && s.found.is_none())
+    }
+
+    /// The plate was found another way (the jaws opened and closed, their motion located it,
+    /// and fresh trackers converged on it): each searched-for plate counts as found at its
+    /// tracker's frame now; the confirmation follows as after a search.
+    pub fn plates_found_by_jaws(&mut self, trackers: &mut StereoTrackerSet) {
+        for s in self.slots.iter_mut().filter(|s| s.role == Role::Gripper && s.found.is_none()) {
+            let Some(t) = trackers.get(s.role, s.view) else { continue };
+            s.found = Some(t.frame().origin - s.base.origin);
+            trackers.set_active(s.role, s.view, true);
+        }
+        self.by_jaws = true;
+    }
+
+    /// Whether the plate was located by the jaws' motion.
+    pub fn by_jaws(&self) -> bool {
+        self.by_jaws
     }
 
     /// Whether the contour in this slot is being searched for or confirmed (its frames are
@@ -281,7 +315,7 @@ impl Recovery {
         now_ns: u64,
         epipolar: Option<&EpipolarCheck>,
     ) -> RecoveryStep {
-        if crate::phase::timed_out(self.start_ns, now_ns, self.patience_s) {
+        if crate::phase::timed_out(self.start_ns.saturating_add(self.excused_ns), now_ns, self.patience_s) {
             let passes = self.slots.iter().map(|s| s.passes).max().unwrap_or(0);
             return RecoveryStep::Failed(RecoveryError::NotFound { what: self.what(), patience_s: self.patience_s, passes, best_score: self.best_score });
         }
@@ -521,5 +555,24 @@ mod tests {
         let RecoveryStep::Failed(why) = step else { panic!("{step:?}") };
         let text = why.to_string();
         assert!(text.contains("gripper tracker (left view) lost: edges gone") && text.contains("not found again within 1.0 s"), "{text}");
+    }
+
+    #[test]
+    fn a_plate_located_by_the_jaws_is_confirmed_and_reported_with_its_shift() {
+        let still = scene(0, 0, 0, false);
+        let (mut set, good) = trackers(&still);
+        let lost = [(Role::Gripper, View::Right, "hidden".to_string())];
+        let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
+        assert!(rec.plate_missing() && !set.is_active(Role::Gripper, View::Right));
+        // The jaws' motion located the plate 20 px to the right: a fresh tracker there.
+        let moved = scene(20, 0, 0, false);
+        let plate = [[177.5, 67.5], [221.5, 67.5], [221.5, 111.5], [177.5, 111.5]];
+        set.insert(Role::Gripper, View::Right, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
+        rec.plates_found_by_jaws(&mut set);
+        assert!(!rec.plate_missing() && rec.by_jaws());
+        let step = run(&mut rec, &mut set, &moved, &moved, 30);
+        let RecoveryStep::Recovered { shifts_px, .. } = step else { panic!("{step:?}") };
+        let d = shifts_px[slot_index(Role::Gripper, View::Right)].expect("the plate's shift");
+        assert!((d[0] - 20.0).abs() < 1.0 && d[1].abs() < 1.0, "{d:?}");
     }
 }

@@ -3,7 +3,6 @@
 //! per-loss record, and the one check every command passes before it is stamped (never a
 //! move on a lost track).
 
-use handeye_vision::image::ImageView;
 use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::Phase;
@@ -12,7 +11,8 @@ use super::HardLoop;
 use crate::config::SafetyConfig;
 use crate::fault::Fault;
 use crate::outcome::LossRecord;
-use crate::phase::Cmd;
+use crate::phase::acquire_gripper::AcquireGripper;
+use crate::phase::{Cmd, Cycle, Step};
 use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
 use crate::safety::{check_trackers, needs_trackers};
 
@@ -20,6 +20,9 @@ use crate::safety::{check_trackers, needs_trackers};
 /// scene is planned again from a fresh pair, s: a target turned by a nudge does not come back
 /// by a shifted search, and an occluder crossing it has passed by then (they cross in 1-2 s).
 pub const TARGET_SEARCH_S: f64 = 4.0;
+/// Camera time a lost plate is searched for before the jaws open and close to locate it, s
+/// (a knocked camera's plate is found within 0.5 s; an occluder has passed within 2 s).
+pub const JAWS_AFTER_S: f64 = 3.0;
 /// A target displacement measured larger than this is not believed (the indicated point
 /// stays), m.
 const MAX_TARGET_MOVE_M: f64 = 0.1;
@@ -122,6 +125,8 @@ impl HardLoop {
             }
             self.mission.reporting.snapshot(if moved.is_some() { "camera_moved" } else { "lost" });
             self.recovery = Some(rec);
+            self.jaws = None;
+            self.jaws_tried = false;
             self.loss_began = (phase, frame_id);
             return true;
         }
@@ -169,12 +174,74 @@ impl HardLoop {
         true
     }
 
+    /// A plate not found by search for [`JAWS_AFTER_S`]: the jaws open and close (as at
+    /// start-up, `phase/acquire_gripper.rs`), their motion locates the plate in both views, and
+    /// fresh plate trackers converge on it; the search waits meanwhile and the time does not
+    /// count against the patience. `Some(cmd)` while the jaws work (gripper commands only:
+    /// the arm holds); a failure ends the hold with its reason.
+    fn jaws_for_lost_plate(&mut self, c: &Cycle<'_>) -> Option<Cmd> {
+        let rec = self.recovery.as_mut()?;
+        if self.jaws.is_none() {
+            if self.jaws_tried || !rec.plate_missing() || !crate::phase::timed_out(rec.start_ns(), c.time_ns, JAWS_AFTER_S) {
+                return None;
+            }
+            tracing::warn!(what = %rec.what(), "plate not found by search: opening and closing the jaws to locate it");
+            self.mission.reporting.set_status("holding: plate not found by search; opening and closing the jaws to locate it");
+            self.jaws = Some((AcquireGripper::new(c.time_ns), c.time_ns));
+            self.jaws_tried = true;
+        }
+        let (jaws, since_ns) = self.jaws.as_mut()?;
+        let since_ns = *since_ns;
+        match jaws.step(&mut self.mission, c) {
+            Step::Stay(cmd) => Some(cmd),
+            Step::Next(cmd) => {
+                self.jaws = None;
+                rec.plates_found_by_jaws(&mut self.mission.trackers);
+                rec.excuse(c.time_ns.saturating_sub(since_ns));
+                tracing::warn!("plate located by the jaws' motion: confirming");
+                self.mission.reporting.set_status("holding: plate located by the jaws' motion; confirming");
+                Some(cmd)
+            }
+            Step::Fail(fault) => {
+                self.jaws = None;
+                let reason = format!("{}; not found by search, and the jaws' motion did not locate it: {}", rec.what(), fault.detail);
+                Some(self.end_hold_failed(c.time_ns, reason))
+            }
+        }
+    }
+
+    /// Ends the hold under way as a failure (`reason`): recorded, the run stopped.
+    fn end_hold_failed(&mut self, now_ns: u64, reason: String) -> Cmd {
+        let Some(rec) = self.recovery.take() else { return Cmd::STOP };
+        let (p, frame_id) = self.loss_began;
+        let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
+        let (search_passes, relapses) = (rec.passes(), rec.relapses());
+        self.losses.push(LossRecord {
+            phase: p.name().into(),
+            frame_id,
+            what: rec.what(),
+            held_s,
+            outcome: reason.clone(),
+            shifts_px: [None; 4],
+            resumed: String::new(),
+            search_passes,
+            relapses,
+        });
+        self.jaws = None;
+        self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason));
+        Cmd::STOP
+    }
+
     /// A cycle while holding for lost trackers: contours the phase needs that are lost now
-    /// join the search; the search runs; the phase resumes when all are back, the run stops
-    /// when the patience is spent.
-    pub(super) fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
+    /// join the search; the search runs (or the jaws locate a plate it did not find); the
+    /// phase resumes when all are back, the run stops when the patience is spent.
+    pub(super) fn hold_and_search(&mut self, phase: Phase, c: &Cycle<'_>) -> Cmd {
+        let (states, now_ns, left, right) = (&c.states, c.time_ns, c.left, c.right);
         if self.replan_for_lost_target(phase, now_ns) {
             return Cmd::HOLD;
+        }
+        if let Some(cmd) = self.jaws_for_lost_plate(c) {
+            return cmd;
         }
         let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
         for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
@@ -190,7 +257,11 @@ impl HardLoop {
                 tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
                 let held_ns = now_ns.saturating_sub(rec.start_ns());
                 let (p, frame_id) = self.loss_began;
-                let outcome = if knock.is_some() { "recovered (a camera moved)" } else { "recovered" };
+                let outcome = match (knock.is_some(), rec.by_jaws()) {
+                    (_, true) => "recovered (the plate located by opening and closing the jaws)",
+                    (true, false) => "recovered (a camera moved)",
+                    (false, false) => "recovered",
+                };
                 let (what, search_passes, relapses) = (rec.what(), rec.passes(), rec.relapses());
                 self.recovery = None;
                 self.recoveries += 1;
@@ -201,25 +272,7 @@ impl HardLoop {
                 self.losses.push(record);
                 Cmd::HOLD
             }
-            RecoveryStep::Failed(reason) => {
-                let (p, frame_id) = self.loss_began;
-                let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
-                let (search_passes, relapses) = (rec.passes(), rec.relapses());
-                self.losses.push(LossRecord {
-                    phase: p.name().into(),
-                    frame_id,
-                    what: rec.what(),
-                    held_s,
-                    outcome: reason.to_string(),
-                    shifts_px: [None; 4],
-                    resumed: String::new(),
-                    search_passes,
-                    relapses,
-                });
-                self.recovery = None;
-                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
-                Cmd::STOP
-            }
+            RecoveryStep::Failed(reason) => self.end_hold_failed(now_ns, reason.to_string()),
         }
     }
 }

@@ -69,6 +69,11 @@ pub struct HardLoop {
     stopped_at_frame: Option<u64>,
     /// Holding the arm while lost trackers are searched for.
     recovery: Option<Recovery>,
+    /// While holding: the jaws opening and closing to locate a plate the search did not find
+    /// (as at start-up), and the camera time it began.
+    jaws: Option<(AcquireGripper, u64)>,
+    /// The jaws were tried in the hold under way (once a hold).
+    jaws_tried: bool,
     /// Losses recovered from, and the camera time the arm held for them, ns.
     recoveries: u32,
     held_ns: u64,
@@ -108,6 +113,8 @@ impl HardLoop {
             telemetry: Telemetry::default(),
             stopped_at_frame: None,
             recovery: None,
+            jaws: None,
+            jaws_tried: false,
             recoveries: 0,
             held_ns: 0,
             last_good: [None; 4],
@@ -208,7 +215,8 @@ impl HardLoop {
         }
         let phase = self.phase.phase();
         if self.recovery.is_some() {
-            return self.hold_and_search(phase, &states, tick.now_ns, left, right);
+            let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
+            return self.hold_and_search(phase, &cycle);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // A tracker the phase needs is lost: hold the arm and search for it (unless
