@@ -114,6 +114,10 @@ pub struct HoldRecord {
     /// Each time the arm held for lost trackers: what, why, for how long, and how it ended.
     #[serde(default)]
     pub losses: Vec<LossRecord>,
+    /// Times a camera was found moved after the calibration (its plate re-found elsewhere
+    /// with the arm held) and the cameras were calibrated again.
+    #[serde(default)]
+    pub recalibrations: u32,
 }
 
 /// One hold for lost trackers (issue 18 item 7).
@@ -133,6 +137,16 @@ pub struct LossRecord {
     /// Each re-found contour's shift from its last good frame, px (gripper left, gripper
     /// right, target left, target right; `null`: not lost, or not found).
     pub shifts_px: [Option<[f64; 2]>; 4],
+    /// What the phase did on resuming ("resumed", "right camera moved (plate 58 px away):
+    /// calibrated again", ...; empty when it did not recover).
+    #[serde(default)]
+    pub resumed: String,
+    /// Search passes over the widest lost contour's grid, and contours re-found that then
+    /// did not hold while confirming (searched for again).
+    #[serde(default)]
+    pub search_passes: u32,
+    #[serde(default)]
+    pub relapses: u32,
 }
 
 #[cfg(test)]
@@ -186,7 +200,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

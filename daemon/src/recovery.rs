@@ -3,14 +3,17 @@
 //! phase that needs one (calibrate, plan, acquire_target, servo), starts a recovery instead
 //! of ending the run: the hard loop stops the arm and holds it; each lost contour is searched
 //! for with [`crate::track_search`] over a grid of image translations of its **last good**
-//! template frame (the frame it last tracked confidently, before it drifted off), centred in
+//! template frame (the frame it last tracked confidently, before it drifted off, with a shape
+//! steady and its own: `hard_loop/shape_watch.rs`), centred in
 //! turn on where it was and where its filter's velocity predicts it, the grid widening with
 //! every pass that found nothing (±40, ±80, then ±160 px, repeated). A candidate must pass
 //! the acquisition's verification (the tracker's confidence, its area within ±11 % of the
 //! template's); when every lost contour is back, all must track confidently for
 //! [`CONFIRM_FRAMES`] frames (the target's outline refined from its edges halfway, as at
 //! acquisition) before the phase resumes from fresh frames. After `safety.loss_patience_s`
-//! of camera time the run fails, naming what was lost, why, and how the search went.
+//! of camera time the run fails, naming what was lost, why, and how the search went. A plate
+//! the search does not find is located by the jaws' motion instead (the hard loop drives
+//! that, `hard_loop/hold.rs`; [`Recovery::plates_found_by_jaws`]).
 //!
 //! A camera knocked is the special case where both contours of one view are lost at once:
 //! the plate (the highest-contrast contour) is searched for and the target follows it by
@@ -75,6 +78,8 @@ struct Slot {
 /// The state of one hold-and-search.
 pub struct Recovery {
     start_ns: u64,
+    /// Camera time not counted against the patience (the jaws opening and closing), ns.
+    excused_ns: u64,
     patience_s: f64,
     min_scores: [f64; 2],
     slots: Vec<Slot>,
@@ -82,6 +87,8 @@ pub struct Recovery {
     best_score: f64,
     /// Contours re-found that then did not hold, and searched for again.
     relapses: u32,
+    /// The plate was located by the jaws' motion, not by the search.
+    by_jaws: bool,
 }
 
 /// What a recovery cycle concluded.
@@ -198,7 +205,7 @@ impl Recovery {
         patience_s: f64,
         min_scores: [f64; 2],
     ) -> Self {
-        let mut r = Self { start_ns: now_ns, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0 };
+        let mut r = Self { start_ns: now_ns, excused_ns: 0, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0, by_jaws: false };
         for (role, view, why) in lost {
             r.add(trackers, *role, *view, why, last_good, now_ns);
         }
@@ -212,6 +219,7 @@ impl Recovery {
             return;
         }
         let Some(tracker) = trackers.get(role, view) else { return };
+        tracing::debug!(who = %name(role, view), why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
         let (base, lost_ns, velocity_px_s) = match last_good[slot_index(role, view)] {
             Some(g) => (g.frame, g.time_ns, Vector2::from(g.velocity_px_s)),
             None => (tracker.frame(), now_ns, Vector2::zeros()),
@@ -230,6 +238,50 @@ impl Recovery {
     /// When the hold began, camera ns.
     pub fn start_ns(&self) -> u64 {
         self.start_ns
+    }
+
+    /// Camera time that does not count against the patience (the jaws located the plate
+    /// meanwhile: the search did not run).
+    pub fn excuse(&mut self, ns: u64) {
+        self.excused_ns = self.excused_ns.saturating_add(ns);
+    }
+
+    /// Whether a plate is still being searched for (not found yet).
+    pub fn plate_missing(&self) -> bool {
+        self.slots.iter().any(|s| s.role == Role::Gripper && s.found.is_none())
+    }
+
+    /// The plate was found another way (the jaws opened and closed, their motion located it,
+    /// and fresh trackers converged on it): each searched-for plate counts as found at its
+    /// tracker's frame now; the confirmation follows as after a search.
+    pub fn plates_found_by_jaws(&mut self, trackers: &mut StereoTrackerSet) {
+        for s in self.slots.iter_mut().filter(|s| s.role == Role::Gripper && s.found.is_none()) {
+            let Some(t) = trackers.get(s.role, s.view) else { continue };
+            s.found = Some(t.frame().origin - s.base.origin);
+            trackers.set_active(s.role, s.view, true);
+        }
+        self.by_jaws = true;
+    }
+
+    /// Whether the plate was located by the jaws' motion.
+    pub fn by_jaws(&self) -> bool {
+        self.by_jaws
+    }
+
+    /// Whether the contour in this slot is being searched for or confirmed (its frames are
+    /// not known good until the recovery ends).
+    pub fn holds_for(&self, role: Role, view: View) -> bool {
+        self.slots.iter().any(|s| s.role == role && s.view == view)
+    }
+
+    /// Whether every contour searched for is `role`'s.
+    pub fn only(&self, role: Role) -> bool {
+        self.slots.iter().all(|s| s.role == role)
+    }
+
+    /// Search passes over the grid so far (the most of any lost contour).
+    pub fn passes(&self) -> u32 {
+        self.slots.iter().map(|s| s.passes).max().unwrap_or(0)
     }
 
     /// Contours re-found that then did not hold while confirming.
@@ -263,7 +315,7 @@ impl Recovery {
         now_ns: u64,
         epipolar: Option<&EpipolarCheck>,
     ) -> RecoveryStep {
-        if crate::phase::timed_out(self.start_ns, now_ns, self.patience_s) {
+        if crate::phase::timed_out(self.start_ns.saturating_add(self.excused_ns), now_ns, self.patience_s) {
             let passes = self.slots.iter().map(|s| s.passes).max().unwrap_or(0);
             return RecoveryStep::Failed(RecoveryError::NotFound { what: self.what(), patience_s: self.patience_s, passes, best_score: self.best_score });
         }
@@ -300,7 +352,8 @@ impl Recovery {
             match slot.search.step_where(base, image, |cand| plausible(cand, role, view, set, epipolar)) {
                 SearchStep::Searching => {}
                 SearchStep::Done(Some(best)) if best.score >= min => {
-                    let frame = ShiftSearch::shifted(&slot.base, best.shift_px);
+                    tracing::debug!(who = %name(role, view), score = best.score, shift = ?best.shift_px, "candidate taken");
+                    let frame = best.frame;
                     slot.found = Some(best.shift_px);
                     self.best_score = self.best_score.max(best.score);
                     if let Some(t) = trackers.get_mut(role, view) {
@@ -309,6 +362,7 @@ impl Recovery {
                     }
                 }
                 SearchStep::Done(best) => {
+                    tracing::debug!(who = %name(role, view), passes = slot.passes, best = ?best, min, "search pass: nothing good enough");
                     self.best_score = self.best_score.max(best.map_or(0.0, |b| b.score));
                     slot.passes += 1;
                     // Alternately around where it was and where its motion predicts it.
@@ -337,6 +391,9 @@ impl Recovery {
             let (role, view) = (self.slots[i].role, self.slots[i].view);
             if !self.holds(trackers, role, view) {
                 relapsed = true;
+                if let Some(t) = trackers.get(role, view) {
+                    tracing::debug!(who = %name(role, view), frames, state = ?t.state(), score = t.confidence().score, "re-found contour did not hold");
+                }
                 let s = &mut self.slots[i];
                 s.found = None;
                 s.passes = 0;
@@ -379,124 +436,5 @@ impl Recovery {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use handeye_vision::image::ImageBuf;
-    use handeye_vision::tracker::{ContourTracker, TrackerConfig};
-
-    const FRAME_NS: u64 = 33_333_333;
-
-    /// A bright plate in a dark border (the gripper) shifted by `(dx, dy)` and a grey square
-    /// (the target) shifted by `(dx + tx, dy)`; `hide_target` paints the target over.
-    fn scene(dx: i64, dy: i64, tx: i64, hide_target: bool) -> ImageBuf {
-        let mut img = ImageBuf::filled(400, 300, 90);
-        let mut rect = |x0: i64, y0: i64, x1: i64, y1: i64, v: u8| {
-            for y in (y0 + dy).max(0)..(y1 + dy).min(300) {
-                for x in (x0 + dx).max(0)..(x1 + dx).min(400) {
-                    img.set(x as usize, y as usize, v);
-                }
-            }
-        };
-        rect(150, 60, 210, 120, 10);
-        rect(158, 68, 202, 112, 220);
-        if !hide_target {
-            rect(160 + tx, 190, 200 + tx, 230, 170);
-        }
-        img
-    }
-
-    fn trackers(img: &ImageBuf) -> (StereoTrackerSet, [Option<LastGood>; 4]) {
-        let plate = [[157.5, 67.5], [201.5, 67.5], [201.5, 111.5], [157.5, 111.5]];
-        let target = [[159.5, 189.5], [199.5, 189.5], [199.5, 229.5], [159.5, 229.5]];
-        let mut set = StereoTrackerSet::new();
-        for v in View::ALL {
-            set.insert(Role::Gripper, v, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
-            set.insert(Role::Target, v, ContourTracker::new(TrackerConfig::default(), &target).unwrap());
-        }
-        for _ in 0..3 {
-            let s = set.update(&img.view(), &img.view(), 0.03);
-            assert!(s.all_active_tracking());
-        }
-        let mut good = [None; 4];
-        for role in [Role::Gripper, Role::Target] {
-            for v in View::ALL {
-                let frame = set.get(role, v).unwrap().frame();
-                good[slot_index(role, v)] = Some(LastGood { frame, time_ns: 0, velocity_px_s: [0.0; 2] });
-            }
-        }
-        (set, good)
-    }
-
-    /// Runs the recovery on `left` (right: `right`) frame after frame until it ends.
-    fn run(rec: &mut Recovery, set: &mut StereoTrackerSet, left: &ImageBuf, right: &ImageBuf, frames: u64) -> RecoveryStep {
-        for k in 1..=frames {
-            set.update(&left.view(), &right.view(), 0.03);
-            let step = rec.step(set, &left.view(), &right.view(), k * FRAME_NS, None);
-            if step != RecoveryStep::Searching {
-                return step;
-            }
-        }
-        RecoveryStep::Searching
-    }
-
-    #[test]
-    fn a_knocked_view_is_found_again_at_its_shift() {
-        let still = scene(0, 0, 0, false);
-        let (mut set, good) = trackers(&still);
-        // The left camera is knocked: its whole image moves 63 px left and 7 px down.
-        let knocked = scene(-63, 7, 0, false);
-        let states = set.update(&knocked.view(), &still.view(), 0.03);
-        assert!(!states.get(Role::Gripper, View::Left).unwrap().is_tracking(), "a 63 px jump loses the tracker");
-        let lost = [(Role::Gripper, View::Left, "jumped".to_string()), (Role::Target, View::Left, "jumped".to_string())];
-        let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
-        assert!(rec.is_searching(Role::Target, View::Left) && !set.is_active(Role::Gripper, View::Left), "lost trackers rest while searched for");
-        let step = run(&mut rec, &mut set, &knocked, &still, 60);
-        let RecoveryStep::Recovered { knock: Some((View::Left, shift)), held_s, .. } = step else { panic!("{step:?}") };
-        assert!((shift[0] + 63.0).abs() < 1.0 && (shift[1] - 7.0).abs() < 1.0, "{shift:?}");
-        assert!(held_s > 0.0);
-        // Both trackers of the view sit on their shapes again.
-        let g = set.get(Role::Gripper, View::Left).unwrap();
-        assert!(g.state().is_tracking());
-        let c = g.corners().next().unwrap();
-        assert!((c.x - (157.5 - 63.0)).abs() < 1.0 && (c.y - (67.5 + 7.0)).abs() < 1.0, "{c:?}");
-        assert!(set.get(Role::Target, View::Left).unwrap().state().is_tracking());
-    }
-
-    #[test]
-    fn a_hidden_target_is_held_for_and_found_where_it_comes_back() {
-        let still = scene(0, 0, 0, false);
-        let (mut set, good) = trackers(&still);
-        // Something covers the target in the right view for 40 frames; it then reappears
-        // 25 px to the right (it was nudged while hidden).
-        let hidden = scene(0, 0, 0, true);
-        let lost = [(Role::Target, View::Right, "support fell".to_string())];
-        let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
-        let step = run(&mut rec, &mut set, &still, &hidden, 40);
-        let t = set.get(Role::Target, View::Right).unwrap();
-        assert_eq!(step, RecoveryStep::Searching, "nothing to find: it keeps holding; found {:?} conf {:?}", t.corners().collect::<Vec<_>>(), t.confidence());
-        let nudged = scene(0, 0, 25, false);
-        let step = run(&mut rec, &mut set, &still, &nudged, 60);
-        let RecoveryStep::Recovered { knock: None, shifts_px, .. } = step else { panic!("{step:?}") };
-        let d = shifts_px[slot_index(Role::Target, View::Right)].expect("the target's shift");
-        assert!((d[0] - 25.0).abs() < 1.0 && d[1].abs() < 1.0 && shifts_px[0].is_none(), "{shifts_px:?}");
-        let t = set.get(Role::Target, View::Right).unwrap();
-        let c = t.corners().next().unwrap();
-        assert!((c.x - (159.5 + 25.0)).abs() < 1.0 && (c.y - 189.5).abs() < 1.0, "{c:?}");
-        assert!(set.is_active(Role::Target, View::Right));
-    }
-
-    #[test]
-    fn nothing_to_find_fails_after_the_patience_naming_what_was_lost() {
-        let still = scene(0, 0, 0, false);
-        let (mut set, good) = trackers(&still);
-        let blank = ImageBuf::filled(400, 300, 90);
-        let lost = [(Role::Gripper, View::Left, "edges gone".to_string())];
-        let mut rec = Recovery::start(&mut set, &lost, &good, 0, 1.0, [0.6, 0.45]);
-        // One second of camera time is 30 frames: still holding at 29, failed by 32.
-        assert_eq!(run(&mut rec, &mut set, &blank, &still, 29), RecoveryStep::Searching);
-        let step = run(&mut rec, &mut set, &blank, &still, 32);
-        let RecoveryStep::Failed(why) = step else { panic!("{step:?}") };
-        let text = why.to_string();
-        assert!(text.contains("gripper tracker (left view) lost: edges gone") && text.contains("not found again within 1.0 s"), "{text}");
-    }
-}
+#[path = "recovery_tests.rs"]
+mod tests;

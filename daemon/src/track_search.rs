@@ -42,12 +42,14 @@ pub enum SearchStep {
     Done(Option<Candidate>),
 }
 
-/// The best candidate found: its confidence and the shift of the template frame it
-/// converged to (finer than the grid), px.
+/// The best candidate found: its confidence, the shift of the template frame it
+/// converged to (finer than the grid), px, and that frame (restart a tracker there: it
+/// carries the turn and scale the candidate converged to as well).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Candidate {
     pub score: f64,
     pub shift_px: Vector2<f64>,
+    pub frame: TemplateFrame,
 }
 
 /// One search over the grid around a centre shift.
@@ -114,7 +116,7 @@ impl ShiftSearch {
             }
             let score = t.confidence().score;
             if self.best.is_none_or(|b| score > b.score) {
-                self.best = Some(Candidate { score, shift_px: t.frame().origin - self.frame.origin });
+                self.best = Some(Candidate { score, shift_px: t.frame().origin - self.frame.origin, frame: t.frame() });
             }
         }
         self.next = end;

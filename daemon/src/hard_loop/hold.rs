@@ -3,7 +3,6 @@
 //! per-loss record, and the one check every command passes before it is stamped (never a
 //! move on a lost track).
 
-use handeye_vision::image::ImageView;
 use handeye_vision::tracker::{Role, StereoStates, StereoTrackerSet, TrackState, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::Phase;
@@ -12,9 +11,26 @@ use super::HardLoop;
 use crate::config::SafetyConfig;
 use crate::fault::Fault;
 use crate::outcome::LossRecord;
-use crate::phase::Cmd;
+use crate::phase::acquire_gripper::AcquireGripper;
+use crate::phase::{Cmd, Cycle, Step};
 use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
 use crate::safety::{check_trackers, needs_trackers};
+
+/// Camera time a target lost in the servo (and nothing else) is searched for before the
+/// scene is planned again from a fresh pair, s: a target turned by a nudge does not come back
+/// by a shifted search, and an occluder crossing it has passed by then (they cross in 1-2 s).
+pub const TARGET_SEARCH_S: f64 = 4.0;
+/// Camera time a lost plate is searched for before the jaws open and close to locate it, s
+/// (a knocked camera's plate is found within 0.5 s; an occluder has passed within 2 s).
+pub const JAWS_AFTER_S: f64 = 3.0;
+/// A target displacement measured larger than this is not believed (the indicated point
+/// stays), m.
+const MAX_TARGET_MOVE_M: f64 = 0.1;
+/// ... nor one with a height change over this (a block slides on the table), m ...
+const MAX_TARGET_RISE_M: f64 = 0.01;
+/// ... nor one from views last tracked this far apart in time (one view followed the block a
+/// while, the other did not: the pair is not one moment), ns.
+const MAX_VIEW_SKEW_NS: u64 = 100_000_000;
 
 /// The trackers `phase` needs that are lost or below their confidence this cycle (active
 /// ones only), with what is wrong with each.
@@ -41,16 +57,26 @@ fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, tracke
 
 impl HardLoop {
     /// Remembers each confidently tracking contour's frame: a later search starts there
-    /// rather than where a contour drifted to while it was being lost.
+    /// rather than where a contour drifted to while it was being lost (nor from a candidate still
+    /// being confirmed), and only from a frame
+    /// whose shape was steady and the contour's own ([`super::shape_watch::ShapeWatch`]).
     pub(super) fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
         let cfg = &self.mission.cfg.safety;
         for role in [Role::Gripper, Role::Target] {
             let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
             for view in View::ALL {
+                let i = slot_index(role, view);
                 let Some(t) = self.mission.trackers.get(role, view) else { continue };
-                let score = t.confidence().score;
-                if matches!(states.get(role, view), Some(TrackState::Tracking)) && score >= min {
-                    self.last_good[slot_index(role, view)] = Some(LastGood { frame: t.frame(), time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
+                if self.recovery.as_ref().is_some_and(|r| r.holds_for(role, view)) {
+                    // A candidate being confirmed is not known good: a search after a relapse
+                    // starts from the frame before the loss, not from the candidate.
+                    continue;
+                }
+                let tracking = matches!(states.get(role, view), Some(TrackState::Tracking));
+                let frame = t.frame();
+                let shape_ok = self.shapes[i].observe(frame, t.update_count(), tracking);
+                if tracking && shape_ok && t.confidence().score >= min {
+                    self.last_good[i] = Some(LastGood { frame, time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
                 }
             }
         }
@@ -99,16 +125,124 @@ impl HardLoop {
             }
             self.mission.reporting.snapshot(if moved.is_some() { "camera_moved" } else { "lost" });
             self.recovery = Some(rec);
+            self.jaws = None;
+            self.jaws_tried = false;
             self.loss_began = (phase, frame_id);
             return true;
         }
         false
     }
 
+    /// How far the target moved on the table (x, y, m) between its acquisition and the last
+    /// frame its trackers held it confidently in both views, through the stereo model; zero
+    /// when unknown.
+    fn target_moved_m(&self) -> [f64; 2] {
+        let (Some(acquired), Some(cal)) = (self.mission.targeting.acquired_px(), self.mission.calibration.get()) else { return [0.0; 2] };
+        let (Some(l), Some(r)) = (self.last_good[slot_index(Role::Target, View::Left)], self.last_good[slot_index(Role::Target, View::Right)]) else {
+            return [0.0; 2];
+        };
+        let now = [l.frame.origin.x, l.frame.origin.y, r.frame.origin.x, r.frame.origin.y];
+        let d = cal.model.reconstruct(&now) - cal.model.reconstruct(&acquired);
+        let skew_ns = l.time_ns.abs_diff(r.time_ns);
+        tracing::debug!(?acquired, ?now, moved_m = ?d, skew_ns, "target's last tracked displacement");
+        if !(d.x.is_finite() && d.y.is_finite()) || d.x.hypot(d.y) > MAX_TARGET_MOVE_M || d.z.abs() > MAX_TARGET_RISE_M || skew_ns > MAX_VIEW_SKEW_NS {
+            return [0.0; 2];
+        }
+        [d.x, d.y]
+    }
+
+    /// The servo's target (and nothing else) lost for [`TARGET_SEARCH_S`]: plans the scene
+    /// again from a fresh pair (the arm parked in view), the indicated point moved with the
+    /// target's last tracked displacement; `false` when not due or not allowed.
+    fn replan_for_lost_target(&mut self, phase: Phase, now_ns: u64) -> bool {
+        let Some(rec) = self.recovery.as_ref() else { return false };
+        if phase != Phase::Servo || !rec.only(Role::Target) || !crate::phase::timed_out(rec.start_ns(), now_ns, TARGET_SEARCH_S) {
+            return false;
+        }
+        let (what, start_ns, search_passes, relapses) = (rec.what(), rec.start_ns(), rec.passes(), rec.relapses());
+        let outcome = format!("not found again within {TARGET_SEARCH_S:.1} s");
+        let moved_m = self.target_moved_m();
+        if !self.phase.replan(&mut self.mission, now_ns, &format!("{what}; {outcome}"), moved_m) {
+            return false;
+        }
+        let held_ns = now_ns.saturating_sub(start_ns);
+        let (p, frame_id) = self.loss_began;
+        let resumed = format!("planning again from a fresh pair; indicated point moved {:.0} mm with the target's last tracked position", moved_m[0].hypot(moved_m[1]) * 1e3);
+        self.losses.push(LossRecord { phase: p.name().into(), frame_id, what, held_s: held_ns as f64 * 1e-9, outcome, shifts_px: [None; 4], resumed, search_passes, relapses });
+        self.recovery = None;
+        self.held_ns += held_ns;
+        true
+    }
+
+    /// A plate not found by search for [`JAWS_AFTER_S`]: the jaws open and close (as at
+    /// start-up, `phase/acquire_gripper.rs`), their motion locates the plate in both views, and
+    /// fresh plate trackers converge on it; the search waits meanwhile and the time does not
+    /// count against the patience. `Some(cmd)` while the jaws work (gripper commands only:
+    /// the arm holds); a failure ends the hold with its reason.
+    fn jaws_for_lost_plate(&mut self, c: &Cycle<'_>) -> Option<Cmd> {
+        let rec = self.recovery.as_mut()?;
+        if self.jaws.is_none() {
+            if self.jaws_tried || !rec.plate_missing() || !crate::phase::timed_out(rec.start_ns(), c.time_ns, JAWS_AFTER_S) {
+                return None;
+            }
+            tracing::warn!(what = %rec.what(), "plate not found by search: opening and closing the jaws to locate it");
+            self.mission.reporting.set_status("holding: plate not found by search; opening and closing the jaws to locate it");
+            self.jaws = Some((AcquireGripper::new(c.time_ns), c.time_ns));
+            self.jaws_tried = true;
+        }
+        let (jaws, since_ns) = self.jaws.as_mut()?;
+        let since_ns = *since_ns;
+        match jaws.step(&mut self.mission, c) {
+            Step::Stay(cmd) => Some(cmd),
+            Step::Next(cmd) => {
+                self.jaws = None;
+                rec.plates_found_by_jaws(&mut self.mission.trackers);
+                rec.excuse(c.time_ns.saturating_sub(since_ns));
+                tracing::warn!("plate located by the jaws' motion: confirming");
+                self.mission.reporting.set_status("holding: plate located by the jaws' motion; confirming");
+                Some(cmd)
+            }
+            Step::Fail(fault) => {
+                self.jaws = None;
+                let reason = format!("{}; not found by search, and the jaws' motion did not locate it: {}", rec.what(), fault.detail);
+                Some(self.end_hold_failed(c.time_ns, reason))
+            }
+        }
+    }
+
+    /// Ends the hold under way as a failure (`reason`): recorded, the run stopped.
+    fn end_hold_failed(&mut self, now_ns: u64, reason: String) -> Cmd {
+        let Some(rec) = self.recovery.take() else { return Cmd::STOP };
+        let (p, frame_id) = self.loss_began;
+        let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
+        let (search_passes, relapses) = (rec.passes(), rec.relapses());
+        self.losses.push(LossRecord {
+            phase: p.name().into(),
+            frame_id,
+            what: rec.what(),
+            held_s,
+            outcome: reason.clone(),
+            shifts_px: [None; 4],
+            resumed: String::new(),
+            search_passes,
+            relapses,
+        });
+        self.jaws = None;
+        self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason));
+        Cmd::STOP
+    }
+
     /// A cycle while holding for lost trackers: contours the phase needs that are lost now
-    /// join the search; the search runs; the phase resumes when all are back, the run stops
-    /// when the patience is spent.
-    pub(super) fn hold_and_search(&mut self, phase: Phase, states: &StereoStates, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Cmd {
+    /// join the search; the search runs (or the jaws locate a plate it did not find); the
+    /// phase resumes when all are back, the run stops when the patience is spent.
+    pub(super) fn hold_and_search(&mut self, phase: Phase, c: &Cycle<'_>) -> Cmd {
+        let (states, now_ns, left, right) = (&c.states, c.time_ns, c.left, c.right);
+        if self.replan_for_lost_target(phase, now_ns) {
+            return Cmd::HOLD;
+        }
+        if let Some(cmd) = self.jaws_for_lost_plate(c) {
+            return cmd;
+        }
         let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
         for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
             rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);
@@ -123,23 +257,22 @@ impl HardLoop {
                 tracing::warn!(?knock, held_s, what = %rec.what(), "lost trackers re-acquired: resuming");
                 let held_ns = now_ns.saturating_sub(rec.start_ns());
                 let (p, frame_id) = self.loss_began;
-                let outcome = if knock.is_some() { "recovered (a camera moved)" } else { "recovered" };
-                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: outcome.into(), shifts_px });
+                let outcome = match (knock.is_some(), rec.by_jaws()) {
+                    (_, true) => "recovered (the plate located by opening and closing the jaws)",
+                    (true, false) => "recovered (a camera moved)",
+                    (false, false) => "recovered",
+                };
+                let (what, search_passes, relapses) = (rec.what(), rec.passes(), rec.relapses());
                 self.recovery = None;
                 self.recoveries += 1;
                 self.held_ns += held_ns;
                 self.mission.reporting.snapshot("reacquired");
-                self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let record = LossRecord { phase: p.name().into(), frame_id, what, held_s, outcome: outcome.into(), shifts_px, resumed: resumed.to_string(), search_passes, relapses };
+                self.losses.push(record);
                 Cmd::HOLD
             }
-            RecoveryStep::Failed(reason) => {
-                let (p, frame_id) = self.loss_began;
-                let held_s = now_ns.saturating_sub(rec.start_ns()) as f64 * 1e-9;
-                self.losses.push(LossRecord { phase: p.name().into(), frame_id, what: rec.what(), held_s, outcome: reason.to_string(), shifts_px: [None; 4] });
-                self.recovery = None;
-                self.stop_reason(Phase::Stopped, Fault::new(FailureKind::TrackerLost, reason.to_string()));
-                Cmd::STOP
-            }
+            RecoveryStep::Failed(reason) => self.end_hold_failed(now_ns, reason.to_string()),
         }
     }
 }

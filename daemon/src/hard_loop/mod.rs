@@ -19,6 +19,9 @@ use handeye_wire::{
 };
 
 mod hold;
+mod shape_watch;
+
+use shape_watch::ShapeWatch;
 
 use crate::camera_clock::{CameraClock, ClockStats, FrameTick};
 use crate::config::DaemonConfig;
@@ -66,12 +69,19 @@ pub struct HardLoop {
     stopped_at_frame: Option<u64>,
     /// Holding the arm while lost trackers are searched for.
     recovery: Option<Recovery>,
+    /// While holding: the jaws opening and closing to locate a plate the search did not find
+    /// (as at start-up), and the camera time it began.
+    jaws: Option<(AcquireGripper, u64)>,
+    /// The jaws were tried in the hold under way (once a hold).
+    jaws_tried: bool,
     /// Losses recovered from, and the camera time the arm held for them, ns.
     recoveries: u32,
     held_ns: u64,
     /// Each tracker's last confident frame (by `recovery::slot_index`): where a search
     /// for it starts.
     last_good: [Option<LastGood>; 4],
+    /// Each tracker's shape history: which of its frames may be a search base.
+    shapes: [ShapeWatch; 4],
     /// Move commands a phase asked for while a tracker it needs was lost, turned into
     /// holds where commands are stamped (a bug if ever non-zero; see `cycle`).
     moves_refused: u64,
@@ -103,9 +113,12 @@ impl HardLoop {
             telemetry: Telemetry::default(),
             stopped_at_frame: None,
             recovery: None,
+            jaws: None,
+            jaws_tried: false,
             recoveries: 0,
             held_ns: 0,
             last_good: [None; 4],
+            shapes: [ShapeWatch::default(); 4],
             moves_refused: 0,
             losses: Vec::new(),
             loss_began: (Phase::AcquireGripper, 0),
@@ -202,7 +215,8 @@ impl HardLoop {
         }
         let phase = self.phase.phase();
         if self.recovery.is_some() {
-            return self.hold_and_search(phase, &states, tick.now_ns, left, right);
+            let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
+            return self.hold_and_search(phase, &cycle);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // A tracker the phase needs is lost: hold the arm and search for it (unless
@@ -385,7 +399,13 @@ impl HardLoop {
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 stop_frame_id: self.stopped_at_frame(),
-                holds: HoldRecord { recoveries: self.recoveries(), held_s: self.held_s(), moves_refused: self.moves_refused(), losses: self.losses.clone() },
+                holds: HoldRecord {
+                    recoveries: self.recoveries(),
+                    held_s: self.held_s(),
+                    moves_refused: self.moves_refused(),
+                    losses: self.losses.clone(),
+                    recalibrations: m.calibration.recalibrations(),
+                },
             },
             servo_trace: m.servo.trace().to_vec(),
             stale_frame_commands: 0, // counted by the service loop, which sees the stream

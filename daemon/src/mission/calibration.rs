@@ -37,6 +37,9 @@ pub struct CalibrationRecord {
     yaw_rad: Option<f64>,
     /// Pose at start-up: where the arm is parked between phases.
     start_pose: Option<([f64; 3], f64)>,
+    /// Times a camera was found moved after the calibration, and the cameras calibrated
+    /// again.
+    recalibrations: u32,
 }
 
 impl CalibrationRecord {
@@ -53,6 +56,16 @@ impl CalibrationRecord {
     pub fn set(&mut self, calibration: Calibration, yaw_rad: f64) {
         self.calibration = Some(calibration);
         self.yaw_rad = Some(yaw_rad);
+    }
+
+    /// A camera moved after the calibration: it is being made again.
+    pub fn note_camera_moved(&mut self) {
+        self.recalibrations += 1;
+    }
+
+    /// Times the cameras were calibrated again after one moved.
+    pub fn recalibrations(&self) -> u32 {
+        self.recalibrations
     }
 
     pub fn stats(&self) -> Option<CalibrationStats> {

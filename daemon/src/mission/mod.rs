@@ -23,6 +23,9 @@ use crate::config::DaemonConfig;
 use crate::gripper::PlateTemplate;
 use crate::phase::job::{spawn_worker, JobWorker};
 
+/// Re-plans a run may make for a moved or unusable target (a nudge, and one more).
+pub const MAX_REPLANS: u32 = 2;
+
 /// State shared across phases.
 pub struct Mission {
     pub cfg: DaemonConfig,
@@ -54,6 +57,39 @@ impl Mission {
             planning: PlanRecord::default(),
             reporting: Reporting::default(),
         })
+    }
+
+    /// A camera moved after the calibration (`view`, its image shifted by about `shift_px`):
+    /// the calibration is made again, so what was worked out in the old camera's pixels goes:
+    /// the target's trackers, and a planned target with its alternatives (the scene is planned
+    /// again). An operator hint's outline in the moved view is shifted with the image (the
+    /// operator clicked the old view).
+    pub fn camera_moved(&mut self, view: View, shift_px: [f64; 2]) {
+        for v in View::ALL {
+            self.trackers.remove(Role::Target, v);
+        }
+        self.targeting.camera_moved(view, shift_px);
+        self.calibration.note_camera_moved();
+        let side = if view == View::Left { "left" } else { "right" };
+        self.reporting.set_status(&format!("{side} camera moved after the calibration: calibrating again"));
+        self.reporting.snapshot("camera_moved");
+    }
+
+    /// Plans the scene again from a fresh pair, if allowed ([`Targeting::can_replan`], at most
+    /// [`MAX_REPLANS`] a run): the target's trackers go, and the indicated point moves by
+    /// `moved_m` with the target. `false`: not allowed (the caller fails as before).
+    pub fn replan(&mut self, why: &str, moved_m: [f64; 2]) -> bool {
+        if !self.targeting.can_replan(MAX_REPLANS) {
+            return false;
+        }
+        tracing::warn!(%why, moved_mm = ?moved_m.map(|v| v * 1e3), "target lost or unusable: planning again from a fresh pair");
+        for view in View::ALL {
+            self.trackers.remove(Role::Target, view);
+        }
+        self.targeting.forget_for_replan(moved_m);
+        self.reporting.set_status("the target moved or could not be held: planning again");
+        self.reporting.snapshot("replan");
+        true
     }
 
     /// Gives up the current target (removing its trackers) for the plan's next grasp site;

@@ -63,6 +63,11 @@ pub struct Targeting {
     alternatives: Vec<TargetSpec>,
     /// Targets tried (1 when the first one served).
     attempts: u32,
+    /// The target's image position (its trackers' frame origins, left u, v, right u, v) when
+    /// it was acquired: how far it moved since is measured from there.
+    acquired_px: Option<[f64; 4]>,
+    /// Times the scene was planned again because the target moved or could not be held.
+    replans: u32,
 }
 
 impl Targeting {
@@ -85,6 +90,24 @@ impl Targeting {
 
     pub fn set_target(&mut self, target: TargetSpec) {
         self.target = Some(target);
+    }
+
+    /// A camera moved and is being calibrated again: a planned target and its alternatives
+    /// are forgotten (planned again with the new calibration); a hint's outline in `view` is
+    /// shifted by `shift_px` with the image.
+    pub fn camera_moved(&mut self, view: handeye_vision::tracker::View, shift_px: [f64; 2]) {
+        self.alternatives.clear();
+        match &mut self.target {
+            Some(t) if t.source == TargetSource::Hint => {
+                let px = if view == handeye_vision::tracker::View::Left { &mut t.left_px } else { &mut t.right_px };
+                for p in px.iter_mut() {
+                    p[0] += shift_px[0];
+                    p[1] += shift_px[1];
+                }
+                t.site_template = None;
+            }
+            _ => self.target = None,
+        }
     }
 
     /// The plan's other grasp sites, next best first.
@@ -111,6 +134,40 @@ impl Targeting {
 
     pub fn set_indicated_m(&mut self, point_m: Option<[f64; 3]>) {
         self.indicated_m = point_m;
+    }
+
+    /// The target's trackers converged on it here (frame origins, left u, v, right u, v).
+    pub fn set_acquired_px(&mut self, px: [f64; 4]) {
+        self.acquired_px = Some(px);
+    }
+
+    pub fn acquired_px(&self) -> Option<[f64; 4]> {
+        self.acquired_px
+    }
+
+    /// Whether the scene may be planned again for a lost or unusable target: the target was
+    /// planned (a hint names one facet; there is nothing to choose again), there is an
+    /// indicated point to choose by, and fewer than `max` re-plans were made.
+    pub fn can_replan(&self, max: u32) -> bool {
+        self.source() == Some(TargetSource::Plan) && self.indicated_m.is_some() && self.replans < max
+    }
+
+    /// The scene is planned again: the target and its alternatives are forgotten and the
+    /// indicated point moves by `moved_m` (x, y: how far the target was last seen to have
+    /// moved), so that it stays on the block.
+    pub fn forget_for_replan(&mut self, moved_m: [f64; 2]) {
+        self.target = None;
+        self.alternatives.clear();
+        self.acquired_px = None;
+        self.replans += 1;
+        if let Some(p) = &mut self.indicated_m {
+            p[0] += moved_m[0];
+            p[1] += moved_m[1];
+        }
+    }
+
+    pub fn replans(&self) -> u32 {
+        self.replans
     }
 
     /// One more target is being acquired.

@@ -116,6 +116,10 @@ impl AcquireTarget {
                 t.site_template = Some(st);
             }
         }
+        if let (Some(l), Some(r)) = (m.trackers.get(Role::Target, View::Left), m.trackers.get(Role::Target, View::Right)) {
+            let (l, r) = (l.frame().origin, r.frame().origin);
+            m.targeting.set_acquired_px([l.x, l.y, r.x, r.y]);
+        }
         m.reporting.snapshot("target_acquired");
         m.reporting.set_status("target acquired");
         Step::Next(Cmd::HOLD)

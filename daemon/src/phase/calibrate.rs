@@ -117,8 +117,9 @@ impl Calibrate {
     /// a point being sampled is visited and sampled afresh (its samples may have included the
     /// frames that lost the plate). A plate found `plate_shift_px` or more from where it was
     /// lost, with the arm held still, means the camera moved: the samples so far belong to
-    /// the camera as it was, and the cage starts again (at `now_ns`, with a fresh time-out).
-    pub fn resume(&mut self, now_ns: u64, held_ns: u64, plate_shift_px: f64) {
+    /// the camera as it was, and the cage starts again (at `now_ns`, with a fresh time-out):
+    /// `true` then.
+    pub fn resume(&mut self, now_ns: u64, held_ns: u64, plate_shift_px: f64) -> bool {
         if plate_shift_px > CAMERA_MOVED_PX && self.fitted.is_none() {
             tracing::warn!(plate_shift_px, "calibrate: the plate came back elsewhere: a camera moved; visiting the cage again");
             self.robot_m.clear();
@@ -126,7 +127,7 @@ impl Calibrate {
             self.start_ns = now_ns;
             self.stage_ns = now_ns;
             self.stage = Stage::Moving { i: 0, wait: None };
-            return;
+            return true;
         }
         self.start_ns = self.start_ns.saturating_add(held_ns);
         self.stage_ns = self.stage_ns.saturating_add(held_ns);
@@ -134,6 +135,7 @@ impl Calibrate {
             Stage::Moving { wait, .. } | Stage::Fitting { wait, .. } => *wait = None,
             Stage::Sampling { i, .. } => self.stage = Stage::Moving { i: *i, wait: None },
         }
+        false
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {

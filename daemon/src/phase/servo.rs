@@ -41,7 +41,7 @@ use handeye_wire::report::FailureKind;
 use handeye_wire::RejectReason;
 use nalgebra::Vector3;
 
-use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Resumed, Step};
 use crate::fault::Fault;
 use crate::gripper::{gripper_view, plate_normal, stereo_frame, tool_from_reference};
 use crate::mission::{Mission, ServoTraceRow};
@@ -362,14 +362,14 @@ impl ServoPhase {
     /// A target re-found more than [`TARGET_MOVED_PX`] from where it was lost (and no
     /// camera moved) has been moved: the servo starts over on it from its approach, with the
     /// goal, the facet's normal and the local model taken again where it is now.
-    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>, target_shift_px: f64) {
+    pub fn resume(&mut self, m: &mut Mission, held_ns: u64, knock: Option<(View, [f64; 2])>, target_shift_px: f64) -> Resumed {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         m.reporting.set_status("servo: resumed after re-acquiring");
         if knock.is_none() && target_shift_px > TARGET_MOVED_PX {
             tracing::warn!(target_shift_px, "servo: the target came back elsewhere: it moved; starting the servo again on it");
             m.reporting.set_status("servo: the target moved; starting again on it");
             self.restart = true;
-            return;
+            return Resumed::TargetMoved { target_shift_px };
         }
         let Some((view, shift_px)) = knock else {
             self.wait = None;
@@ -383,7 +383,7 @@ impl ServoPhase {
                 self.stage = Stage::Servo { converging: false };
             }
             self.servo.reset();
-            return;
+            return Resumed::Resumed;
         };
         self.wait = None;
         self.target_recent = TargetMean::default();
@@ -409,6 +409,7 @@ impl ServoPhase {
             Ok(servo) => self.servo = servo,
             Err(_) => self.servo.reset(),
         }
+        Resumed::KnockFollowed { view }
     }
 
     /// At local cage point `i` (arrived and settled): sample, then move on; after the last,

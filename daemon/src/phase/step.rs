@@ -3,7 +3,7 @@
 //! ([`MoveWait`]) and time-outs on the camera clock ([`crate::camera_clock`]).
 
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::StereoStates;
+use handeye_vision::tracker::{StereoStates, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, CommandKind, GripperCommand, RobotState};
 
@@ -136,4 +136,35 @@ pub fn elapsed_at_least(start_ns: u64, now_ns: u64, seconds: f64) -> bool {
 /// `true` when `now_ns` is past `start_ns + timeout_s` of camera time.
 pub fn timed_out(start_ns: u64, now_ns: u64, timeout_s: f64) -> bool {
     now_ns.saturating_sub(start_ns) > ns(timeout_s).saturating_add(STAMP_SLACK_NS)
+}
+
+/// What a phase did when it picked up after a hold (the loss's record says it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Resumed {
+    /// Went on where it stopped (a move under way sent again, samples being taken afresh).
+    Resumed,
+    /// Calibrating: the plate came back this far away: a camera moved; the cage from the start.
+    CageAgain { plate_shift_px: f64 },
+    /// After the calibration: the plate came back shifted in this view: a camera moved;
+    /// calibrating again (and planning again, for a planned target).
+    Recalibrate { view: View, shift_px: [f64; 2] },
+    /// Servoing: a knocked view; the servo's model moved with its image.
+    KnockFollowed { view: View },
+    /// Servoing: the target came back this far away: it moved; the servo started again on it.
+    TargetMoved { target_shift_px: f64 },
+}
+
+impl std::fmt::Display for Resumed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let side = |v: &View| if *v == View::Left { "left" } else { "right" };
+        match self {
+            Self::Resumed => write!(f, "resumed"),
+            Self::CageAgain { plate_shift_px } => write!(f, "a camera moved (plate {plate_shift_px:.0} px away): cage visited again"),
+            Self::Recalibrate { view, shift_px } => {
+                write!(f, "{} camera moved (plate {:.0} px away): calibrated again", side(view), shift_px[0].hypot(shift_px[1]))
+            }
+            Self::KnockFollowed { view } => write!(f, "{} camera moved: the servo's model follows its image", side(view)),
+            Self::TargetMoved { target_shift_px } => write!(f, "the target moved ({target_shift_px:.0} px): servo started again on it"),
+        }
+    }
 }

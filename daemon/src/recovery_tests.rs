@@ -1,0 +1,141 @@
+//! Tests of [`crate::recovery`]: knocked views, hidden and nudged targets, the patience,
+//! plates located by the jaws.
+
+use super::*;
+use handeye_vision::image::ImageBuf;
+use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+
+const FRAME_NS: u64 = 33_333_333;
+
+/// A bright plate in a dark border (the gripper) shifted by `(dx, dy)` and a grey square
+/// (the target) shifted by `(dx + tx, dy)`; `hide_target` paints the target over.
+fn scene(dx: i64, dy: i64, tx: i64, hide_target: bool) -> ImageBuf {
+    let mut img = ImageBuf::filled(400, 300, 90);
+    let mut rect = |x0: i64, y0: i64, x1: i64, y1: i64, v: u8| {
+        for y in (y0 + dy).max(0)..(y1 + dy).min(300) {
+            for x in (x0 + dx).max(0)..(x1 + dx).min(400) {
+                img.set(x as usize, y as usize, v);
+            }
+        }
+    };
+    rect(150, 60, 210, 120, 10);
+    rect(158, 68, 202, 112, 220);
+    if !hide_target {
+        rect(160 + tx, 190, 200 + tx, 230, 170);
+    }
+    img
+}
+
+fn trackers(img: &ImageBuf) -> (StereoTrackerSet, [Option<LastGood>; 4]) {
+    let plate = [[157.5, 67.5], [201.5, 67.5], [201.5, 111.5], [157.5, 111.5]];
+    let target = [[159.5, 189.5], [199.5, 189.5], [199.5, 229.5], [159.5, 229.5]];
+    let mut set = StereoTrackerSet::new();
+    for v in View::ALL {
+        set.insert(Role::Gripper, v, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
+        set.insert(Role::Target, v, ContourTracker::new(TrackerConfig::default(), &target).unwrap());
+    }
+    for _ in 0..3 {
+        let s = set.update(&img.view(), &img.view(), 0.03);
+        assert!(s.all_active_tracking());
+    }
+    let mut good = [None; 4];
+    for role in [Role::Gripper, Role::Target] {
+        for v in View::ALL {
+            let frame = set.get(role, v).unwrap().frame();
+            good[slot_index(role, v)] = Some(LastGood { frame, time_ns: 0, velocity_px_s: [0.0; 2] });
+        }
+    }
+    (set, good)
+}
+
+/// Runs the recovery on `left` (right: `right`) frame after frame until it ends.
+fn run(rec: &mut Recovery, set: &mut StereoTrackerSet, left: &ImageBuf, right: &ImageBuf, frames: u64) -> RecoveryStep {
+    for k in 1..=frames {
+        set.update(&left.view(), &right.view(), 0.03);
+        let step = rec.step(set, &left.view(), &right.view(), k * FRAME_NS, None);
+        if step != RecoveryStep::Searching {
+            return step;
+        }
+    }
+    RecoveryStep::Searching
+}
+
+#[test]
+fn a_knocked_view_is_found_again_at_its_shift() {
+    let still = scene(0, 0, 0, false);
+    let (mut set, good) = trackers(&still);
+    // The left camera is knocked: its whole image moves 63 px left and 7 px down.
+    let knocked = scene(-63, 7, 0, false);
+    let states = set.update(&knocked.view(), &still.view(), 0.03);
+    assert!(!states.get(Role::Gripper, View::Left).unwrap().is_tracking(), "a 63 px jump loses the tracker");
+    let lost = [(Role::Gripper, View::Left, "jumped".to_string()), (Role::Target, View::Left, "jumped".to_string())];
+    let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
+    assert!(rec.is_searching(Role::Target, View::Left) && !set.is_active(Role::Gripper, View::Left), "lost trackers rest while searched for");
+    let step = run(&mut rec, &mut set, &knocked, &still, 60);
+    let RecoveryStep::Recovered { knock: Some((View::Left, shift)), held_s, .. } = step else { panic!("{step:?}") };
+    assert!((shift[0] + 63.0).abs() < 1.0 && (shift[1] - 7.0).abs() < 1.0, "{shift:?}");
+    assert!(held_s > 0.0);
+    // Both trackers of the view sit on their shapes again.
+    let g = set.get(Role::Gripper, View::Left).unwrap();
+    assert!(g.state().is_tracking());
+    let c = g.corners().next().unwrap();
+    assert!((c.x - (157.5 - 63.0)).abs() < 1.0 && (c.y - (67.5 + 7.0)).abs() < 1.0, "{c:?}");
+    assert!(set.get(Role::Target, View::Left).unwrap().state().is_tracking());
+}
+
+#[test]
+fn a_hidden_target_is_held_for_and_found_where_it_comes_back() {
+    let still = scene(0, 0, 0, false);
+    let (mut set, good) = trackers(&still);
+    // Something covers the target in the right view for 40 frames; it then reappears
+    // 25 px to the right (it was nudged while hidden).
+    let hidden = scene(0, 0, 0, true);
+    let lost = [(Role::Target, View::Right, "support fell".to_string())];
+    let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
+    let step = run(&mut rec, &mut set, &still, &hidden, 40);
+    let t = set.get(Role::Target, View::Right).unwrap();
+    assert_eq!(step, RecoveryStep::Searching, "nothing to find: it keeps holding; found {:?} conf {:?}", t.corners().collect::<Vec<_>>(), t.confidence());
+    let nudged = scene(0, 0, 25, false);
+    let step = run(&mut rec, &mut set, &still, &nudged, 60);
+    let RecoveryStep::Recovered { knock: None, shifts_px, .. } = step else { panic!("{step:?}") };
+    let d = shifts_px[slot_index(Role::Target, View::Right)].expect("the target's shift");
+    assert!((d[0] - 25.0).abs() < 1.0 && d[1].abs() < 1.0 && shifts_px[0].is_none(), "{shifts_px:?}");
+    let t = set.get(Role::Target, View::Right).unwrap();
+    let c = t.corners().next().unwrap();
+    assert!((c.x - (159.5 + 25.0)).abs() < 1.0 && (c.y - 189.5).abs() < 1.0, "{c:?}");
+    assert!(set.is_active(Role::Target, View::Right));
+}
+
+#[test]
+fn nothing_to_find_fails_after_the_patience_naming_what_was_lost() {
+    let still = scene(0, 0, 0, false);
+    let (mut set, good) = trackers(&still);
+    let blank = ImageBuf::filled(400, 300, 90);
+    let lost = [(Role::Gripper, View::Left, "edges gone".to_string())];
+    let mut rec = Recovery::start(&mut set, &lost, &good, 0, 1.0, [0.6, 0.45]);
+    // One second of camera time is 30 frames: still holding at 29, failed by 32.
+    assert_eq!(run(&mut rec, &mut set, &blank, &still, 29), RecoveryStep::Searching);
+    let step = run(&mut rec, &mut set, &blank, &still, 32);
+    let RecoveryStep::Failed(why) = step else { panic!("{step:?}") };
+    let text = why.to_string();
+    assert!(text.contains("gripper tracker (left view) lost: edges gone") && text.contains("not found again within 1.0 s"), "{text}");
+}
+
+#[test]
+fn a_plate_located_by_the_jaws_is_confirmed_and_reported_with_its_shift() {
+    let still = scene(0, 0, 0, false);
+    let (mut set, good) = trackers(&still);
+    let lost = [(Role::Gripper, View::Right, "hidden".to_string())];
+    let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
+    assert!(rec.plate_missing() && !set.is_active(Role::Gripper, View::Right));
+    // The jaws' motion located the plate 20 px to the right: a fresh tracker there.
+    let moved = scene(20, 0, 0, false);
+    let plate = [[177.5, 67.5], [221.5, 67.5], [221.5, 111.5], [177.5, 111.5]];
+    set.insert(Role::Gripper, View::Right, ContourTracker::new(TrackerConfig::default(), &plate).unwrap());
+    rec.plates_found_by_jaws(&mut set);
+    assert!(!rec.plate_missing() && rec.by_jaws());
+    let step = run(&mut rec, &mut set, &moved, &moved, 30);
+    let RecoveryStep::Recovered { shifts_px, .. } = step else { panic!("{step:?}") };
+    let d = shifts_px[slot_index(Role::Gripper, View::Right)].expect("the plate's shift");
+    assert!((d[0] - 20.0).abs() < 1.0 && d[1].abs() < 1.0, "{d:?}");
+}
