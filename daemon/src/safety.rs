@@ -14,7 +14,8 @@ pub fn needs_trackers(phase: Phase) -> (bool, bool) {
     match phase {
         // While the target trackers converge the arm holds still: acquire_target judges them
         // itself at the end (and may try the plan's next grasp site instead).
-        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => (true, false),
+        // Point: the arm parks and holds while the operator points; the plate stays tracked.
+        Phase::Calibrate | Phase::Point | Phase::Plan | Phase::AcquireTarget => (true, false),
         Phase::Servo => (true, true),
         _ => (false, false),
     }

@@ -164,7 +164,7 @@ impl HardLoop {
         let cmd = self.decide(frame_index, frame_id, tick, left, right, states);
         let cmd = self.refuse_blind_moves(cmd, phase_before, &states);
         let phase = self.phase.phase();
-        if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
+        if !matches!(phase, Phase::Failed | Phase::Stopped) && phase.order() > self.phase_reached.order() {
             self.phase_reached = phase;
         }
         // The first cycle after the run failed or stopped stops the arm explicitly.
@@ -285,6 +285,7 @@ impl HardLoop {
         t.servo_steps = self.mission.servo.steps();
         t.dropped_frames = self.clock.dropped_frames();
         t.planning = u32::from(self.mission.worker.busy());
+        self.mission.pointing.fill_telemetry(t);
         match &self.failure {
             Some(failure) => t.set_reason(&failure.detail),
             None => t.set_reason(self.mission.reporting.status()),
@@ -384,6 +385,7 @@ impl HardLoop {
                 planning: m.planning.stats(),
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
+                pointing: m.pointing.summary(),
                 stop_frame_id: self.stopped_at_frame(),
                 holds: HoldRecord { recoveries: self.recoveries(), held_s: self.held_s(), moves_refused: self.moves_refused(), losses: self.losses.clone() },
             },

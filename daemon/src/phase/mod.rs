@@ -1,5 +1,6 @@
-//! The daemon's phases (METHOD.md §1, §3, §6): acquire gripper → calibrate → plan (unless
-//! an operator hint names the target) → acquire target → servo → grasp → lift → done, each
+//! The daemon's phases (METHOD.md §1, §3, §4, §6): acquire gripper → calibrate → point
+//! (unless an indicated point or a hint was given: the operator points at the block) → plan
+//! (unless an operator hint names the target) → acquire target → servo → grasp → lift → done, each
 //! with a time-out and a typed failure; `failed` and `stopped` end a run. One file per
 //! phase; what they share lives in modules of its own ([`step`]: commands, steps, moves;
 //! [`job`]: worker jobs; [`crate::mission`]: the state across phases). A phase never
@@ -16,6 +17,7 @@ pub mod calibrate;
 pub mod grasp;
 pub mod job;
 pub mod plan;
+pub mod point;
 pub mod servo;
 pub mod step;
 
@@ -31,6 +33,7 @@ use crate::mission::Mission;
 pub enum PhaseState {
     AcquireGripper(acquire_gripper::AcquireGripper),
     Calibrate(calibrate::Calibrate),
+    Point(point::PointPhase),
     Plan(plan::PlanPhase),
     AcquireTarget(acquire_target::AcquireTarget),
     Servo(Box<servo::ServoPhase>),
@@ -46,6 +49,7 @@ impl PhaseState {
         match self {
             Self::AcquireGripper(_) => Phase::AcquireGripper,
             Self::Calibrate(_) => Phase::Calibrate,
+            Self::Point(_) => Phase::Point,
             Self::Plan(_) => Phase::Plan,
             Self::AcquireTarget(_) => Phase::AcquireTarget,
             Self::Servo(_) => Phase::Servo,
@@ -69,6 +73,7 @@ impl PhaseState {
         let far = |d: Option<[f64; 2]>| d.map_or(0.0, |d| d[0].hypot(d[1]));
         match self {
             Self::Calibrate(p) => p.resume(now_ns, held_ns, far(shifts_px[0]).max(far(shifts_px[1]))),
+            Self::Point(p) => p.resume(held_ns),
             Self::Plan(p) => p.resume(held_ns),
             Self::AcquireTarget(p) => p.resume(held_ns),
             Self::Servo(p) => p.resume(m, held_ns, knock, far(shifts_px[2]).max(far(shifts_px[3]))),
@@ -81,6 +86,7 @@ impl PhaseState {
         let step = match self {
             Self::AcquireGripper(p) => p.step(m, c),
             Self::Calibrate(p) => p.step(m, c),
+            Self::Point(p) => p.step(m, c),
             Self::Plan(p) => p.step(m, c),
             Self::AcquireTarget(p) => p.step(m, c),
             Self::Servo(p) => p.step(m, c),
@@ -101,7 +107,9 @@ impl PhaseState {
                 Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.time_ns)),
                 // With a target from the operator hint there is nothing to plan.
                 Self::Calibrate(_) if m.targeting.target().is_some() => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
-                Self::Calibrate(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
+                // Without an indicated point the operator is asked to point.
+                Self::Calibrate(_) if m.targeting.indicated_m().is_none() => Self::Point(point::PointPhase::new(c.time_ns)),
+                Self::Calibrate(_) | Self::Point(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
                 Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),

@@ -1,0 +1,297 @@
+//! Point (thesis ch. 4, METHOD.md §4, issue 19): without an indicated point the daemon asks
+//! the operator for one. The arm parks out of the hand's way (`[point] park_m`, towards its
+//! base, where no hand comes from) and settles; the scene without the hand is the gesture
+//! tracker's background. Every frame then goes, copied, to the gesture tracker on its own
+//! thread ([`crate::gesture_thread`]: its ~1.1 ms update stays out of the 1 ms cycle, the
+//! gripper trackers keep running at frame rate), and its result comes back a fixed number
+//! of frames later.
+//!
+//! The plane maps carry each view's finger line onto the working plane (the height of the
+//! lowest cage points: the plane the indicated point of `--point-m` lies on). They are fitted
+//! from the daemon's own calibration: pinhole cameras fitted to the cage (the plate's
+//! reference point at each tool position, the tool/plate lever taken off, as the planner
+//! does), which then give the pixels of the four lowest cage *tool* points. No ground truth.
+//!
+//! An answer (`Indicated`) becomes the targeting's indicated point; the daemon waits for the
+//! hand to go (the planner must not see it), returns the arm to where the calibration left
+//! it, and goes on to plan. A refusal (degenerate, uncertain, unsteady, no line) is recorded
+//! with its numbers, and the daemon waits for the hand to go and for the next gesture.
+//! `[point] timeout_s` ends the run naming every gesture seen.
+
+use handeye_vision::pointing::{GestureConfig, GestureState, PlaneHomography, Pointing, PointingTracker};
+use handeye_vision::planner::projective::ProjectiveStereo;
+use handeye_wire::report::FailureKind;
+use handeye_wire::{robot_flags, RejectReason};
+use nalgebra::Vector3;
+
+use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use crate::gesture_thread::{GestureResult, GestureThread};
+use crate::gripper::tool_from_reference;
+use crate::mission::pointing::GestureRecord;
+use crate::mission::Mission;
+
+/// After an answer, how long the daemon waits for the hand to go before it returns the arm
+/// and plans anyway, s of camera time.
+const WITHDRAW_WAIT_S: f64 = 10.0;
+
+#[derive(Debug)]
+enum Stage {
+    /// Going to the park pose.
+    Park { wait: Option<MoveWait> },
+    /// Arm still for this many frames.
+    Settle { still: u32 },
+    /// Watching for gestures; `refused`: the last gesture was refused and the hand is still
+    /// there (its further states are the same gesture's).
+    Watch { refused: bool },
+    /// Answered; waiting for the hand to go, since `since_ns`.
+    Withdraw { since_ns: u64 },
+    /// Returning the arm to where the calibration left it.
+    Return { wait: Option<MoveWait> },
+}
+
+pub struct PointPhase {
+    start_ns: u64,
+    stage: Stage,
+    thread: Option<GestureThread>,
+    plane_z_m: f64,
+}
+
+/// The plane maps of both views from the calibration (module docs), the plane's height and
+/// the pinhole fit's RMS residual, px.
+pub fn plane_maps(m: &Mission) -> Result<(Pointing, f64, f64), String> {
+    let cal = m.calibration.get().ok_or("not calibrated")?;
+    let yaw = m.calibration.yaw_rad().ok_or("no calibration yaw")?;
+    let lever = tool_from_reference(&m.cfg.gripper, yaw);
+    let reference_m: Vec<Vector3<f64>> = cal.cage_robot_m.iter().map(|x| x - lever).collect();
+    let cams = ProjectiveStereo::fit(&reference_m, &cal.cage_image_px).map_err(|e| format!("pinhole cameras from the cage: {e}"))?;
+    let z = cal.cage_robot_m.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+    let lowest: Vec<&Vector3<f64>> = cal.cage_robot_m.iter().filter(|p| p.z < z + 1e-3).collect();
+    if lowest.len() < 4 {
+        return Err(format!("{} cage points at the lowest height {z:.3} m: the plane maps need 4", lowest.len()));
+    }
+    let plane: Vec<[f64; 2]> = lowest.iter().map(|p| [p.x, p.y]).collect();
+    let px: Vec<[f64; 4]> = lowest.iter().map(|p| cams.project(&Vector3::new(p.x, p.y, z))).collect();
+    let fit = |k: usize| {
+        let view: Vec<[f64; 2]> = px.iter().map(|w| [w[2 * k], w[2 * k + 1]]).collect();
+        PlaneHomography::fit(&plane, &view).map_err(|e| format!("plane map of the {} view: {e}", ["left", "right"][k]))
+    };
+    Ok((Pointing::new(fit(0)?, fit(1)?), z, cams.residual_rms_px))
+}
+
+/// The refusal or the answer of a gesture that ended, for the record; `None` while it goes on.
+fn record(r: &GestureResult, time_ns: u64, plane_z_m: f64) -> Option<GestureRecord> {
+    let base = |outcome: &str, detail: String| GestureRecord {
+        frame_id: r.frame_id,
+        time_s: time_ns as f64 * 1e-9,
+        outcome: outcome.into(),
+        point_m: None,
+        sigma_mm: None,
+        crossing_deg: None,
+        tip_px: None,
+        line_px: None,
+        detail,
+    };
+    Some(match r.state {
+        GestureState::Absent | GestureState::Moving { .. } => return None,
+        GestureState::Indicated(p) => GestureRecord {
+            point_m: Some([p.point_m[0], p.point_m[1], plane_z_m]),
+            sigma_mm: Some(p.sigma_m * 1e3),
+            crossing_deg: Some(p.crossing_rad.to_degrees()),
+            tip_px: Some([p.axes[0].tip_px, p.axes[1].tip_px]),
+            line_px: Some([0, 1].map(|v| [p.axes[v].line.0[0], p.axes[v].line.0[1], p.axes[v].line.0[2]])),
+            ..base(
+                "indicated",
+                format!(
+                    "({:.3}, {:.3}) m, sigma {:.1} mm, lines crossing at {:.0}°",
+                    p.point_m[0],
+                    p.point_m[1],
+                    p.sigma_m * 1e3,
+                    p.crossing_rad.to_degrees()
+                ),
+            )
+        },
+        GestureState::Degenerate { crossing_rad } => GestureRecord {
+            crossing_deg: Some(crossing_rad.to_degrees()),
+            ..base("degenerate", format!("the finger's line lies nearly in a plane through both cameras (plane lines crossing at {:.1}°)", crossing_rad.to_degrees()))
+        },
+        GestureState::Uncertain { sigma_m } => GestureRecord {
+            sigma_mm: Some(sigma_m * 1e3),
+            ..base("uncertain", format!("too little of the finger measured (one-sigma radius {:.1} mm)", sigma_m * 1e3))
+        },
+        GestureState::Unsteady { frames } => base("unsteady", format!("the hand did not hold still in {frames} frames")),
+        GestureState::NoLine { frames, views } => {
+            base("no_line", format!("no finger line in {} view(s) over {frames} frames (seen end-on, hidden or cut by the border)", 2 - views))
+        }
+    })
+}
+
+impl PointPhase {
+    pub fn new(time_ns: u64) -> Self {
+        Self { start_ns: time_ns, stage: Stage::Park { wait: None }, thread: None, plane_z_m: f64::NAN }
+    }
+
+    /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not
+    /// count; a move under way is sent again, a settle starts over; a gesture under way goes
+    /// on (the frames missed meanwhile were not handed over).
+    pub fn resume(&mut self, held_ns: u64) {
+        self.start_ns = self.start_ns.saturating_add(held_ns);
+        match &mut self.stage {
+            Stage::Park { wait } | Stage::Return { wait } => *wait = None,
+            Stage::Settle { still } => *still = 0,
+            Stage::Watch { .. } => {}
+            Stage::Withdraw { since_ns } => *since_ns = since_ns.saturating_add(held_ns),
+        }
+    }
+
+    /// What the gestures so far were, for the time-out's failure.
+    fn seen(m: &Mission) -> String {
+        let g = m.pointing.gestures();
+        if g.is_empty() {
+            return "no gesture seen".into();
+        }
+        let each: Vec<String> = g.iter().map(|g| format!("{}: {}", g.outcome, g.detail)).collect();
+        format!("{} gesture(s), none answered: {}", g.len(), each.join("; "))
+    }
+
+    /// Hands this frame to the gesture tracker and takes the result that is due.
+    fn watch(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Option<GestureResult> {
+        let t = self.thread.as_mut()?;
+        let result = t.poll(c.frame_index);
+        if t.submit(c.frame_index, c.frame_id, c.left, c.right) {
+            m.pointing.submitted();
+        }
+        if let Some(r) = &result {
+            m.pointing.result(r);
+        }
+        result
+    }
+
+    fn start_watching(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Result<(), String> {
+        let (pointing, z, rms) = plane_maps(m)?;
+        let config = GestureConfig { max_sigma_m: m.cfg.point().max_sigma_m, ..GestureConfig::default() };
+        let wait = std::time::Duration::from_millis(m.cfg.timing.worker_wait_ms);
+        let mut thread = GestureThread::spawn(PointingTracker::new(pointing, config), c.left.width(), c.left.height(), wait)
+            .map_err(|e| format!("cannot start the gesture thread: {e}"))?;
+        if !thread.set_background(c.left, c.right) {
+            return Err("the gesture thread took no background".into());
+        }
+        self.thread = Some(thread);
+        self.plane_z_m = z;
+        m.pointing.start(z, rms);
+        Ok(())
+    }
+
+    fn move_to(&mut self, m: &mut Mission, c: &Cycle<'_>, to: [f64; 3], what: &str) -> Result<bool, Step> {
+        let wait = match &mut self.stage {
+            Stage::Park { wait } | Stage::Return { wait } => wait,
+            _ => return Ok(true),
+        };
+        let Some(w) = wait else {
+            *wait = Some(MoveWait::new(c.seq, c.frame_index));
+            return Err(Step::Stay(Cmd::move_to(to, f64::from(c.robot.tool_yaw_rad), m.cfg.calibration.speed_mps)));
+        };
+        match w.poll(c, 1) {
+            MovePoll::Pending => Ok(false),
+            MovePoll::Rejected(code) => Err(Step::fail(FailureKind::RobotRefused, format!("point: the robot refused the {what} pose: {}", RejectReason::text_of(code)))),
+            MovePoll::Done => Ok(true),
+        }
+    }
+
+    pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
+        if timed_out(self.start_ns, c.time_ns, m.cfg.point().timeout_s) {
+            return Step::fail(FailureKind::TimedOut, format!("point: no pointing gesture answered in {} s ({})", m.cfg.point().timeout_s, Self::seen(m)));
+        }
+        match self.stage {
+            Stage::Park { .. } => {
+                let park = m.cfg.point().park_m.clone();
+                if park.len() == 3 {
+                    m.reporting.set_status("point: parking out of the hand's way");
+                    match self.move_to(m, c, [park[0], park[1], park[2]], "park") {
+                        Ok(true) => {}
+                        Ok(false) => return Step::Stay(Cmd::HOLD),
+                        Err(step) => return step,
+                    }
+                }
+                self.stage = Stage::Settle { still: 0 };
+                Step::Stay(Cmd::HOLD)
+            }
+            Stage::Settle { still } => {
+                let moving = c.robot.flags & robot_flags::MOVING != 0;
+                let still = if moving { 0 } else { still + 1 };
+                self.stage = Stage::Settle { still };
+                if still <= m.cfg.point().settle_frames {
+                    m.reporting.set_status("point: arm parked, settling");
+                    return Step::Stay(Cmd::HOLD);
+                }
+                if let Err(why) = self.start_watching(m, c) {
+                    return Step::fail(FailureKind::Internal, format!("point: {why}"));
+                }
+                m.reporting.set_status("point: waiting for the operator to point");
+                m.reporting.snapshot("point_background");
+                self.stage = Stage::Watch { refused: false };
+                Step::Stay(Cmd::HOLD)
+            }
+            Stage::Watch { refused } => {
+                let Some(r) = self.watch(m, c) else { return Step::Stay(Cmd::HOLD) };
+                if matches!(r.state, GestureState::Absent) {
+                    if refused {
+                        m.reporting.set_status("point: gesture refused; waiting for the next one");
+                    }
+                    self.stage = Stage::Watch { refused: false };
+                    return Step::Stay(Cmd::HOLD);
+                }
+                if refused {
+                    return Step::Stay(Cmd::HOLD); // the refused gesture's hand is still there
+                }
+                let Some(g) = record(&r, c.time_ns, self.plane_z_m) else {
+                    m.reporting.set_status("point: a hand in view");
+                    return Step::Stay(Cmd::HOLD);
+                };
+                tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
+                let answered = g.point_m;
+                m.pointing.gesture(g);
+                match answered {
+                    Some(p) => {
+                        m.targeting.set_indicated_m(Some(p));
+                        m.reporting.set_status("point: indicated; waiting for the hand to go");
+                        m.reporting.snapshot("pointed");
+                        self.stage = Stage::Withdraw { since_ns: c.time_ns };
+                    }
+                    None => {
+                        m.reporting.set_status("point: gesture refused; waiting for the hand to go");
+                        m.reporting.snapshot("point_refused");
+                        self.stage = Stage::Watch { refused: true };
+                    }
+                }
+                Step::Stay(Cmd::HOLD)
+            }
+            Stage::Withdraw { since_ns } => {
+                let gone = self.watch(m, c).is_some_and(|r| matches!(r.state, GestureState::Absent));
+                if !gone && !timed_out(since_ns, c.time_ns, WITHDRAW_WAIT_S) {
+                    return Step::Stay(Cmd::HOLD);
+                }
+                if !gone {
+                    tracing::warn!("the hand stayed in view {WITHDRAW_WAIT_S} s after pointing: planning with it there");
+                }
+                self.thread = None; // joins the gesture thread
+                m.pointing.stop();
+                self.stage = Stage::Return { wait: None };
+                Step::Stay(Cmd::HOLD)
+            }
+            Stage::Return { .. } => {
+                // Where the calibration parked it: the plan's view is the one it always had.
+                let cal_park = &m.cfg.calibration.park_m;
+                let back = if cal_park.len() == 3 { Some([cal_park[0], cal_park[1], cal_park[2]]) } else { m.calibration.start_pose().map(|(p, _)| p) };
+                if let Some(p) = back.filter(|_| m.cfg.point().park_m.len() == 3) {
+                    m.reporting.set_status("point: arm returning for the plan");
+                    match self.move_to(m, c, p, "return") {
+                        Ok(true) => {}
+                        Ok(false) => return Step::Stay(Cmd::HOLD),
+                        Err(step) => return step,
+                    }
+                }
+                Step::Next(Cmd::HOLD)
+            }
+        }
+    }
+}
