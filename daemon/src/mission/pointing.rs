@@ -48,6 +48,10 @@ pub struct PointingSummary {
     pub update_us_max: f64,
     /// Height of the working plane the lines were carried onto, m (the lowest cage points').
     pub plane_z_m: f64,
+    /// What the gesture tracker said, each time it changed: frame id and state (`absent`,
+    /// `moving`, `indicated`, ...), the first 200 changes.
+    #[serde(default)]
+    pub changes: Vec<(u64, String)>,
     /// RMS distance of the fitted pinhole cameras from the cage pixels they were fitted to,
     /// px: how well the plane maps are grounded.
     pub plane_fit_rms_px: f64,
@@ -67,6 +71,24 @@ pub struct PointingRecord {
     newest: Option<GestureResult>,
     plane_z_m: f64,
     plane_fit_rms_px: f64,
+    changes: Vec<(u64, String)>,
+}
+
+/// State changes kept for `daemon.json`.
+const MAX_CHANGES: usize = 200;
+
+/// A gesture state's name, as telemetry's `pointing_state` names it.
+fn state_name(s: &GestureState) -> &'static str {
+    let p = match s {
+        GestureState::Absent => PointingState::Absent,
+        GestureState::Moving { .. } => PointingState::Moving,
+        GestureState::Indicated(_) => PointingState::Indicated,
+        GestureState::Degenerate { .. } => PointingState::Degenerate,
+        GestureState::Uncertain { .. } => PointingState::Uncertain,
+        GestureState::Unsteady { .. } => PointingState::Unsteady,
+        GestureState::NoLine { .. } => PointingState::NoLine,
+    };
+    p.name()
 }
 
 impl Default for PointingRecord {
@@ -81,6 +103,7 @@ impl Default for PointingRecord {
             newest: None,
             plane_z_m: f64::NAN,
             plane_fit_rms_px: f64::NAN,
+            changes: Vec::new(),
         }
     }
 }
@@ -100,6 +123,10 @@ impl PointingRecord {
     /// A result taken this cycle.
     pub fn result(&mut self, r: &GestureResult) {
         self.update.record_ns(r.update_ns.max(1));
+        let name = state_name(&r.state);
+        if self.changes.len() < MAX_CHANGES && self.changes.last().is_none_or(|(_, last)| last != name) {
+            self.changes.push((r.frame_id, name.to_string()));
+        }
         self.this_cycle = Some(*r);
         self.newest = Some(*r);
     }
@@ -140,6 +167,7 @@ impl PointingRecord {
                 update_us_max: us(self.update.max_ns()),
                 plane_z_m: self.plane_z_m,
                 plane_fit_rms_px: self.plane_fit_rms_px,
+                changes: self.changes.clone(),
             }
         })
     }

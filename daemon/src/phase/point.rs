@@ -16,10 +16,13 @@
 //! hand to go (the planner must not see it), returns the arm to where the calibration left
 //! it, and goes on to plan. A refusal (degenerate, uncertain, unsteady, no line) is recorded
 //! with its numbers, and the daemon waits for the hand to go and for the next gesture.
-//! `[point] timeout_s` ends the run naming every gesture seen.
+//! `[point] timeout_s` ends the run naming every gesture seen. A hand that passes in front of
+//! the parked plate does not stop the watching: the arm stands still, and it moves (park,
+//! return) only while both plate trackers track.
 
 use handeye_vision::pointing::{GestureConfig, GestureState, PlaneHomography, Pointing, PointingTracker};
 use handeye_vision::planner::projective::ProjectiveStereo;
+use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, RejectReason};
 use nalgebra::Vector3;
@@ -34,6 +37,9 @@ use crate::mission::Mission;
 /// and plans anyway, s of camera time.
 const WITHDRAW_WAIT_S: f64 = 10.0;
 
+/// How long the arm waits for a lost plate before returning for the plan, s of camera time.
+const PLATE_WAIT_S: f64 = 2.0;
+
 #[derive(Debug)]
 enum Stage {
     /// Going to the park pose.
@@ -46,7 +52,7 @@ enum Stage {
     /// Answered; waiting for the hand to go, since `since_ns`.
     Withdraw { since_ns: u64 },
     /// Returning the arm to where the calibration left it.
-    Return { wait: Option<MoveWait> },
+    Return { wait: Option<MoveWait>, since_ns: u64 },
 }
 
 pub struct PointPhase {
@@ -76,6 +82,11 @@ pub fn plane_maps(m: &Mission) -> Result<(Pointing, f64, f64), String> {
         PlaneHomography::fit(&plane, &view).map_err(|e| format!("plane map of the {} view: {e}", ["left", "right"][k]))
     };
     Ok((Pointing::new(fit(0)?, fit(1)?), z, cams.residual_rms_px))
+}
+
+/// Both plate trackers track on this frame.
+fn plate_tracked(c: &Cycle<'_>) -> bool {
+    View::ALL.into_iter().all(|v| c.states.get(Role::Gripper, v).is_some_and(|s| s.is_tracking()))
 }
 
 /// The refusal or the answer of a gesture that ended, for the record; `None` while it goes on.
@@ -136,7 +147,7 @@ impl PointPhase {
     pub fn resume(&mut self, held_ns: u64) {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         match &mut self.stage {
-            Stage::Park { wait } | Stage::Return { wait } => *wait = None,
+            Stage::Park { wait } | Stage::Return { wait, .. } => *wait = None,
             Stage::Settle { still } => *still = 0,
             Stage::Watch { .. } => {}
             Stage::Withdraw { since_ns } => *since_ns = since_ns.saturating_add(held_ns),
@@ -181,11 +192,19 @@ impl PointPhase {
         Ok(())
     }
 
+    /// Moves the arm to `to` and waits for it: `Ok(true)` when there. Only while both plate
+    /// trackers track: the safety check does not hold the arm for a lost plate in this
+    /// phase (see `safety::needs_trackers`), so the phase does: no move goes out, and one under
+    /// way is stopped and sent again once the plate is back.
     fn move_to(&mut self, m: &mut Mission, c: &Cycle<'_>, to: [f64; 3], what: &str) -> Result<bool, Step> {
         let wait = match &mut self.stage {
-            Stage::Park { wait } | Stage::Return { wait } => wait,
+            Stage::Park { wait } | Stage::Return { wait, .. } => wait,
             _ => return Ok(true),
         };
+        if !plate_tracked(c) {
+            m.reporting.set_status("point: plate not tracked; arm held");
+            return Err(Step::Stay(if wait.take().is_some() { Cmd::STOP } else { Cmd::HOLD }));
+        }
         let Some(w) = wait else {
             *wait = Some(MoveWait::new(c.seq, c.frame_index));
             return Err(Step::Stay(Cmd::move_to(to, f64::from(c.robot.tool_yaw_rad), m.cfg.calibration.speed_mps)));
@@ -275,10 +294,10 @@ impl PointPhase {
                 }
                 self.thread = None; // joins the gesture thread
                 m.pointing.stop();
-                self.stage = Stage::Return { wait: None };
+                self.stage = Stage::Return { wait: None, since_ns: c.time_ns };
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Return { .. } => {
+            Stage::Return { since_ns, .. } => {
                 // Where the calibration parked it: the plan's view is the one it always had.
                 let cal_park = &m.cfg.calibration.park_m;
                 let back = if cal_park.len() == 3 { Some([cal_park[0], cal_park[1], cal_park[2]]) } else { m.calibration.start_pose().map(|(p, _)| p) };
@@ -287,6 +306,9 @@ impl PointPhase {
                     match self.move_to(m, c, p, "return") {
                         Ok(true) => {}
                         Ok(false) => return Step::Stay(Cmd::HOLD),
+                        // The plate still not tracked after a while: the plan phase holds
+                        // the arm and searches for it; it plans from where the arm stands.
+                        Err(_) if !plate_tracked(c) && timed_out(since_ns, c.time_ns, PLATE_WAIT_S) => return Step::Next(Cmd::HOLD),
                         Err(step) => return step,
                     }
                 }
