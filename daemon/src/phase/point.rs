@@ -67,11 +67,16 @@ pub struct PointPhase {
 pub fn plane_maps(m: &Mission) -> Result<(Pointing, f64, f64), String> {
     let cal = m.calibration.get().ok_or("not calibrated")?;
     let yaw = m.calibration.yaw_rad().ok_or("no calibration yaw")?;
-    let lever = tool_from_reference(&m.cfg.gripper, yaw);
-    let reference_m: Vec<Vector3<f64>> = cal.cage_robot_m.iter().map(|x| x - lever).collect();
-    let cams = ProjectiveStereo::fit(&reference_m, &cal.cage_image_px).map_err(|e| format!("pinhole cameras from the cage: {e}"))?;
-    let z = cal.cage_robot_m.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-    let lowest: Vec<&Vector3<f64>> = cal.cage_robot_m.iter().filter(|p| p.z < z + 1e-3).collect();
+    plane_maps_from(&cal.cage_robot_m, &cal.cage_image_px, &tool_from_reference(&m.cfg.gripper, yaw))
+}
+
+/// The same from the cage: tool positions (robot frame, m), the plate reference point's
+/// images `(u, v, u', v')` at each, and the lever `tool − reference` at the calibration yaw.
+pub fn plane_maps_from(cage_robot_m: &[Vector3<f64>], cage_image_px: &[[f64; 4]], lever_m: &Vector3<f64>) -> Result<(Pointing, f64, f64), String> {
+    let reference_m: Vec<Vector3<f64>> = cage_robot_m.iter().map(|x| x - lever_m).collect();
+    let cams = ProjectiveStereo::fit(&reference_m, cage_image_px).map_err(|e| format!("pinhole cameras from the cage: {e}"))?;
+    let z = cage_robot_m.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+    let lowest: Vec<&Vector3<f64>> = cage_robot_m.iter().filter(|p| p.z < z + 1e-3).collect();
     if lowest.len() < 4 {
         return Err(format!("{} cage points at the lowest height {z:.3} m: the plane maps need 4", lowest.len()));
     }
@@ -315,5 +320,60 @@ impl PointPhase {
                 Step::Next(Cmd::HOLD)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use handeye_vision::pointing::ImageLine;
+    use nalgebra::{Matrix3x4, Vector4};
+
+    /// A pinhole camera at `eye` looking at `at` (z up), 1800 px focal length, 640x480.
+    fn camera(eye: Vector3<f64>, at: Vector3<f64>) -> Matrix3x4<f64> {
+        let f = (at - eye).normalize();
+        let r = f.cross(&Vector3::z()).normalize();
+        let d = f.cross(&r); // image v downwards
+        let rot = nalgebra::Matrix3::from_rows(&[r.transpose(), d.transpose(), f.transpose()]);
+        let k = nalgebra::Matrix3::new(1800.0, 0.0, 320.0, 0.0, 1800.0, 240.0, 0.0, 0.0, 1.0);
+        let mut rt = Matrix3x4::zeros();
+        rt.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
+        rt.set_column(3, &(-rot * eye));
+        k * rt
+    }
+
+    fn px(p: &Matrix3x4<f64>, x: &Vector3<f64>) -> [f64; 2] {
+        let h = p * Vector4::new(x.x, x.y, x.z, 1.0);
+        [h[0] / h[2], h[1] / h[2]]
+    }
+
+    #[test]
+    fn the_plane_maps_carry_finger_lines_to_the_point_on_the_lowest_cage_plane() {
+        let at = Vector3::new(0.35, 0.0, 0.16);
+        let cams = [camera(Vector3::new(1.695, -0.241, 0.9), at), camera(Vector3::new(1.695, 0.241, 0.9), at)];
+        let cage: Vec<Vector3<f64>> = crate::config::CalibrationConfig::default().cage_m.iter().map(|p| Vector3::from(*p)).collect();
+        // The plate's reference point 0.1 m above and 0.056 m in front of the tool point:
+        // the cameras see it, not the tool point the robot reports.
+        let lever = Vector3::new(0.056, 0.0, -0.1);
+        let images: Vec<[f64; 4]> = cage
+            .iter()
+            .map(|x| {
+                let (l, r) = (px(&cams[0], &(x - lever)), px(&cams[1], &(x - lever)));
+                [l[0], l[1], r[0], r[1]]
+            })
+            .collect();
+        let (pointing, z, rms) = plane_maps_from(&cage, &images, &lever).unwrap();
+        assert!((z - 0.06).abs() < 1e-12 && rms < 1e-6, "z {z}, rms {rms}");
+        // A finger line through the point's image in each view, from different directions.
+        let x = Vector3::new(0.41, 0.03, z);
+        let through = |v: usize, other: Vector3<f64>| ImageLine::through(&px(&cams[v], &x), &px(&cams[v], &other)).unwrap();
+        let hit = pointing.indicate(&through(0, Vector3::new(0.5, 0.15, 0.25)), &through(1, Vector3::new(0.3, 0.12, 0.3))).unwrap();
+        let err = (hit.point_m[0] - x.x).hypot(hit.point_m[1] - x.y);
+        assert!(err < 1e-4, "indicated {:?}, {:.2} mm from {x:?}", hit.point_m, err * 1e3);
+        // Fitted to the tool positions as if the cameras saw them (the lever ignored), the
+        // same lines land centimetres away.
+        let (naive, _, _) = plane_maps_from(&cage, &images, &Vector3::zeros()).unwrap();
+        let off = naive.indicate(&through(0, Vector3::new(0.5, 0.15, 0.25)), &through(1, Vector3::new(0.3, 0.12, 0.3))).unwrap();
+        assert!((off.point_m[0] - x.x).hypot(off.point_m[1] - x.y) > 0.01, "{:?}", off.point_m);
     }
 }
