@@ -14,11 +14,9 @@ pub fn needs_trackers(phase: Phase) -> (bool, bool) {
     match phase {
         // While the target trackers converge the arm holds still: acquire_target judges them
         // itself at the end (and may try the plan's next grasp site instead).
-        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => (true, false),
-        // Point: the arm stands parked while the operator points, and the hand may pass in
-        // front of the plate: a hold for it would starve the gesture tracker of frames. The
-        // phase moves the arm (park, return) only while both plate trackers track
-        // (`phase/point.rs`); the plan phase after it holds and searches for a lost plate.
+        // Point: a hand passing in front of the parked plate holds the arm while the plate is
+        // searched for; the gesture is watched meanwhile (`PhaseState::keep_watching`).
+        Phase::Calibrate | Phase::Point | Phase::Plan | Phase::AcquireTarget => (true, false),
         Phase::Servo => (true, true),
         _ => (false, false),
     }

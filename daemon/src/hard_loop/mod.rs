@@ -201,19 +201,21 @@ impl HardLoop {
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
+        let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         if self.recovery.is_some() {
+            self.phase.keep_watching(&mut self.mission, &cycle); // the operator's gesture goes on
             return self.hold_and_search(phase, &states, tick.now_ns, left, right);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // A tracker the phase needs is lost: hold the arm and search for it (unless
             // holding is switched off).
             if self.start_hold(phase, frame_id, tick.now_ns, &states) {
+                self.phase.keep_watching(&mut self.mission, &cycle);
                 return Cmd::STOP;
             }
             self.stop_reason(Phase::Stopped, fault);
             return Cmd::STOP;
         }
-        let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         match self.phase.step(&mut self.mission, &cycle) {
             Step::Stay(c) | Step::Next(c) => c,
             Step::Fail(fault) => {

@@ -81,6 +81,15 @@ impl PhaseState {
         }
     }
 
+    /// On a frame the arm holds for lost trackers: the point phase goes on watching the
+    /// operator's gesture (a hand in front of the plate is why it was lost); the other phases
+    /// wait.
+    pub fn keep_watching(&mut self, m: &mut Mission, c: &Cycle<'_>) {
+        if let Self::Point(p) = self {
+            p.keep_watching(m, c.frame_index, c.frame_id, c.time_ns, c.left, c.right);
+        }
+    }
+
     /// Runs the current phase for one cycle; on `Next` builds the following phase.
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let step = match self {

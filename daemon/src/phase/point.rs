@@ -17,8 +17,9 @@
 //! it, and goes on to plan. A refusal (degenerate, uncertain, unsteady, no line) is recorded
 //! with its numbers, and the daemon waits for the hand to go and for the next gesture.
 //! `[point] timeout_s` ends the run naming every gesture seen. A hand that passes in front of
-//! the parked plate does not stop the watching: the arm stands still, and it moves (park,
-//! return) only while both plate trackers track.
+//! the parked plate does not stop the watching: the arm holds while the plate is searched for
+//! ([`crate::recovery`]), and the frames meanwhile still go to the gesture tracker
+//! ([`PointPhase::keep_watching`]).
 
 use handeye_vision::pointing::{GestureConfig, GestureState, PlaneHomography, Pointing, PointingTracker};
 use handeye_vision::planner::projective::ProjectiveStereo;
@@ -28,6 +29,8 @@ use handeye_wire::{robot_flags, RejectReason};
 use nalgebra::Vector3;
 
 use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
+use handeye_vision::image::ImageView;
+
 use crate::gesture_thread::{GestureResult, GestureThread};
 use crate::gripper::tool_from_reference;
 use crate::mission::pointing::GestureRecord;
@@ -49,8 +52,8 @@ enum Stage {
     /// Watching for gestures; `refused`: the last gesture was refused and the hand is still
     /// there (its further states are the same gesture's).
     Watch { refused: bool },
-    /// Answered; waiting for the hand to go, since `since_ns`.
-    Withdraw { since_ns: u64 },
+    /// Answered; waiting for the hand to go, since `since_ns`; `gone`: it went.
+    Withdraw { since_ns: u64, gone: bool },
     /// Returning the arm to where the calibration left it.
     Return { wait: Option<MoveWait>, since_ns: u64 },
 }
@@ -155,7 +158,7 @@ impl PointPhase {
             Stage::Park { wait } | Stage::Return { wait, .. } => *wait = None,
             Stage::Settle { still } => *still = 0,
             Stage::Watch { .. } => {}
-            Stage::Withdraw { since_ns } => *since_ns = since_ns.saturating_add(held_ns),
+            Stage::Withdraw { since_ns, .. } => *since_ns = since_ns.saturating_add(held_ns),
         }
     }
 
@@ -169,17 +172,53 @@ impl PointPhase {
         format!("{} gesture(s), none answered: {}", g.len(), each.join("; "))
     }
 
-    /// Hands this frame to the gesture tracker and takes the result that is due.
-    fn watch(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Option<GestureResult> {
-        let t = self.thread.as_mut()?;
-        let result = t.poll(c.frame_index);
-        if t.submit(c.frame_index, c.frame_id, c.left, c.right) {
+    /// One frame of watching the operator (the watch and withdraw stages): hands it to the
+    /// gesture tracker, takes the result that is due and acts on it. Also called by the hard
+    /// loop on the frames the arm holds for a lost plate (the hand passing in front of it):
+    /// the arm stands still either way, and the gesture goes on.
+    pub fn keep_watching(&mut self, m: &mut Mission, frame_index: u64, frame_id: u64, time_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) {
+        let (Stage::Watch { .. } | Stage::Withdraw { gone: false, .. }) = self.stage else { return };
+        let Some(t) = self.thread.as_mut() else { return };
+        let result = t.poll(frame_index);
+        if t.submit(frame_index, frame_id, left, right) {
             m.pointing.submitted();
         }
-        if let Some(r) = &result {
-            m.pointing.result(r);
+        let Some(r) = result else { return };
+        m.pointing.result(&r);
+        let absent = matches!(r.state, GestureState::Absent);
+        match &mut self.stage {
+            Stage::Withdraw { gone, .. } => *gone = absent,
+            Stage::Watch { refused } if absent => {
+                if *refused {
+                    m.reporting.set_status("point: gesture refused; waiting for the next one");
+                }
+                *refused = false;
+            }
+            Stage::Watch { refused: true } => {} // the refused gesture's hand is still there
+            Stage::Watch { refused: false } => {
+                let Some(g) = record(&r, time_ns, self.plane_z_m) else {
+                    m.reporting.set_status("point: a hand in view");
+                    return;
+                };
+                tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
+                let answered = g.point_m;
+                m.pointing.gesture(g);
+                match answered {
+                    Some(p) => {
+                        m.targeting.set_indicated_m(Some(p));
+                        m.reporting.set_status("point: indicated; waiting for the hand to go");
+                        m.reporting.snapshot("pointed");
+                        self.stage = Stage::Withdraw { since_ns: time_ns, gone: false };
+                    }
+                    None => {
+                        m.reporting.set_status("point: gesture refused; waiting for the hand to go");
+                        m.reporting.snapshot("point_refused");
+                        self.stage = Stage::Watch { refused: true };
+                    }
+                }
+            }
+            _ => {}
         }
-        result
     }
 
     fn start_watching(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Result<(), String> {
@@ -255,42 +294,15 @@ impl PointPhase {
                 self.stage = Stage::Watch { refused: false };
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Watch { refused } => {
-                let Some(r) = self.watch(m, c) else { return Step::Stay(Cmd::HOLD) };
-                if matches!(r.state, GestureState::Absent) {
-                    if refused {
-                        m.reporting.set_status("point: gesture refused; waiting for the next one");
-                    }
-                    self.stage = Stage::Watch { refused: false };
-                    return Step::Stay(Cmd::HOLD);
-                }
-                if refused {
-                    return Step::Stay(Cmd::HOLD); // the refused gesture's hand is still there
-                }
-                let Some(g) = record(&r, c.time_ns, self.plane_z_m) else {
-                    m.reporting.set_status("point: a hand in view");
-                    return Step::Stay(Cmd::HOLD);
-                };
-                tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
-                let answered = g.point_m;
-                m.pointing.gesture(g);
-                match answered {
-                    Some(p) => {
-                        m.targeting.set_indicated_m(Some(p));
-                        m.reporting.set_status("point: indicated; waiting for the hand to go");
-                        m.reporting.snapshot("pointed");
-                        self.stage = Stage::Withdraw { since_ns: c.time_ns };
-                    }
-                    None => {
-                        m.reporting.set_status("point: gesture refused; waiting for the hand to go");
-                        m.reporting.snapshot("point_refused");
-                        self.stage = Stage::Watch { refused: true };
-                    }
-                }
+            Stage::Watch { .. } => {
+                self.keep_watching(m, c.frame_index, c.frame_id, c.time_ns, c.left, c.right);
                 Step::Stay(Cmd::HOLD)
             }
-            Stage::Withdraw { since_ns } => {
-                let gone = self.watch(m, c).is_some_and(|r| matches!(r.state, GestureState::Absent));
+            Stage::Withdraw { since_ns, gone } => {
+                if !gone {
+                    self.keep_watching(m, c.frame_index, c.frame_id, c.time_ns, c.left, c.right);
+                }
+                let gone = matches!(self.stage, Stage::Withdraw { gone: true, .. });
                 if !gone && !timed_out(since_ns, c.time_ns, WITHDRAW_WAIT_S) {
                     return Step::Stay(Cmd::HOLD);
                 }
