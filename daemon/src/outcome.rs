@@ -91,6 +91,10 @@ pub struct TaskRecord {
     /// Targets tried: the plan's next grasp site is tried when one cannot be acquired.
     pub target_attempts: u32,
     pub grip_width_mm: Option<f64>,
+    /// The point phase: every gesture seen, the indicated point, the gesture tracker's
+    /// update time (`None`: the daemon was given its point or a hint).
+    #[serde(default)]
+    pub pointing: Option<crate::mission::PointingSummary>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
     /// The holds for lost trackers (flattened: the keys stay top-level).
@@ -183,6 +187,7 @@ mod tests {
                 planning: None,
                 target_attempts: 1,
                 grip_width_mm: None,
+                pointing: None,
                 stop_frame_id: Some(u64::MAX),
                 holds: HoldRecord::default(),
             },
@@ -200,7 +205,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "pointing", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

@@ -23,6 +23,10 @@ pub struct Snapshot {
     pub right: ImageBuf,
     pub corners: [[[f32; 2]; 8]; TELEMETRY_TRACKERS],
     pub tracker_state: [u32; TELEMETRY_TRACKERS],
+    /// The pointing finger's line (`a u + b v + c = 0`) and tip per view, as telemetry
+    /// reported them (NaN: none).
+    pub finger_line_px: [[f32; 3]; 2],
+    pub finger_tip_px: [[f32; 2]; 2],
 }
 
 impl Snapshot {
@@ -35,6 +39,8 @@ impl Snapshot {
             right: right.to_owned(),
             corners: t.tracker_corners_px,
             tracker_state: t.tracker_state,
+            finger_line_px: t.pointing_line_px,
+            finger_tip_px: t.pointing_tip_px,
         }
     }
 }
@@ -156,8 +162,37 @@ pub fn overlay(s: &Snapshot) -> RgbImage {
             draw_line(&mut img, a, b, colour);
         }
     }
+    // The pointing finger's line across each view (it runs on to the pointed point), and
+    // its tip.
+    for v in 0..2 {
+        let [a, b, c] = s.finger_line_px[v].map(f64::from);
+        let dx = (v as u32 * w) as f64;
+        if [a, b, c].iter().all(|x| x.is_finite()) && a.hypot(b) > 1e-9 {
+            let (wf, hf) = (f64::from(w), f64::from(h));
+            let ends = if b.abs() > a.abs() {
+                [[0.0, -c / b], [wf - 1.0, -(c + a * (wf - 1.0)) / b]]
+            } else {
+                [[-c / a, 0.0], [-(c + b * (hf - 1.0)) / a, hf - 1.0]]
+            };
+            // Only inside this view's half.
+            let steps = ((ends[1][0] - ends[0][0]).abs().max((ends[1][1] - ends[0][1]).abs()).ceil() as usize).clamp(1, 10_000);
+            for i in 0..=steps {
+                let f = i as f64 / steps as f64;
+                let (x, y) = ((ends[0][0] + f * (ends[1][0] - ends[0][0])).round(), (ends[0][1] + f * (ends[1][1] - ends[0][1])).round());
+                if (0.0..wf).contains(&x) && (0.0..hf).contains(&y) {
+                    img.put_pixel((x + dx) as u32, y as u32, FINGER);
+                }
+            }
+        }
+        let tip = s.finger_tip_px[v].map(f64::from);
+        if tip.iter().all(|x| x.is_finite()) {
+            ring(&mut img, tip, dx, 5.0, FINGER);
+        }
+    }
     img
 }
+
+const FINGER: Rgb<u8> = Rgb([0, 255, 255]);
 
 /// Distinct colours for the planner's facets.
 const FACET_COLOURS: [Rgb<u8>; 8] = [
@@ -271,11 +306,23 @@ mod tests {
         let mut corners = [[[f32::NAN; 2]; 8]; 4];
         corners[0][..4].copy_from_slice(&[[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0]]);
         corners[3][..3].copy_from_slice(&[[50.0, 50.0], [70.0, 50.0], [60.0, 70.0]]);
-        let s = Snapshot { label: "t", frame_id: 1, left, right, corners, tracker_state: [1, 0, 0, 2] };
+        let s = Snapshot {
+            label: "t",
+            frame_id: 1,
+            left,
+            right,
+            corners,
+            tracker_state: [1, 0, 0, 2],
+            // A horizontal finger line at v = 40 in the right view, its tip at u = 60.
+            finger_line_px: [[f32::NAN; 3], [0.0, 1.0, -40.0]],
+            finger_tip_px: [[f32::NAN; 2], [60.0, 40.0]],
+        };
         let img = overlay(&s);
         assert_eq!(img.dimensions(), (200, 80));
         assert_eq!(*img.get_pixel(20, 10), GRIPPER, "gripper left edge");
         assert_eq!(*img.get_pixel(160, 50), LOST, "target right (lost), shifted into the right half");
         assert_eq!(*img.get_pixel(60, 50), Rgb([50, 50, 50]), "nothing drawn in the left half for a right tracker");
+        assert_eq!(*img.get_pixel(100 + 20, 40), FINGER, "the finger's line across the right view");
+        assert_eq!(*img.get_pixel(20, 40), Rgb([50, 50, 50]), "no finger line in the left view");
     }
 }

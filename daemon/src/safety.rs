@@ -14,7 +14,9 @@ pub fn needs_trackers(phase: Phase) -> (bool, bool) {
     match phase {
         // While the target trackers converge the arm holds still: acquire_target judges them
         // itself at the end (and may try the plan's next grasp site instead).
-        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => (true, false),
+        // Point: a hand passing in front of the parked plate holds the arm while the plate is
+        // searched for; the gesture is watched meanwhile (`PhaseState::keep_watching`).
+        Phase::Calibrate | Phase::Point | Phase::Plan | Phase::AcquireTarget => (true, false),
         Phase::Servo => (true, true),
         _ => (false, false),
     }

@@ -60,11 +60,22 @@ impl PointerGesture {
     pub fn of_scenario(scenario: &Scenario) -> Option<Self> {
         let cfg = scenario.pointer.as_ref()?;
         let p = scenario.indicated_point_m();
-        Some(Self::draw(cfg, DVec3::from_array(p), mix64(scenario.seed ^ 0x0050_4f49_4e54_4552)))
+        Some(Self::draw(cfg, DVec3::from_array(p), gesture_seed(scenario.seed, 0)))
     }
 
-    /// Draws a gesture pointing at `intended_m` (on the working plane) from `seed`.
+    /// Draws a gesture pointing at `intended_m` (on the working plane) from `seed`, starting
+    /// at `cfg.at_s`.
     pub fn draw(cfg: &PointerConfig, intended_m: DVec3, seed: u64) -> Self {
+        Self::draw_at(cfg, intended_m, seed, s_to_ns(cfg.at_s))
+    }
+
+    /// When the hand has gone, ns.
+    pub fn end_ns(&self) -> u64 {
+        self.times_ns[3]
+    }
+
+    /// The same, starting at `at_ns`.
+    pub fn draw_at(cfg: &PointerConfig, intended_m: DVec3, seed: u64, at_ns: u64) -> Self {
         let mut rng = SplitMix64::new(seed);
         let azimuth_deg = rng.range(cfg.azimuth_deg[0], cfg.azimuth_deg[1]);
         let elevation_deg = rng.range(cfg.elevation_deg[0], cfg.elevation_deg[1]);
@@ -85,7 +96,7 @@ impl PointerGesture {
         let aim_m = tip_m - back * ((tip_m.z - intended_m.z) / back.z);
         let y = DVec3::Z.cross(back).normalize_or(DVec3::Y);
         let rotation = DMat3::from_cols(back, y, back.cross(y));
-        let t0 = s_to_ns(cfg.at_s);
+        let t0 = at_ns;
         let t1 = t0 + s_to_ns(cfg.enter_s);
         let t2 = t1 + s_to_ns(cfg.hold_s);
         let t3 = t2 + s_to_ns(cfg.withdraw_s);
@@ -161,6 +172,67 @@ impl PointerGesture {
     }
 }
 
+/// The seed of a scenario's `k`-th gesture (0: the first).
+fn gesture_seed(scenario_seed: u64, k: u64) -> u64 {
+    mix64(scenario_seed ^ 0x0050_4f49_4e54_4552 ^ k.wrapping_mul(0x9e37_79b9_7f4a_7c15))
+}
+
+/// The person behind the gestures: points again, from a new direction, when the robot did
+/// not react to a gesture (`[pointer] repeats`). Watches the arm only (where the tool is),
+/// as a person would; never the daemon's telemetry.
+#[derive(Debug, Clone)]
+pub struct PointerOperator {
+    cfg: PointerConfig,
+    intended_m: DVec3,
+    scenario_seed: u64,
+    /// Gestures made, the current one last.
+    made: u64,
+    /// Where the tool was when the current gesture's hand had gone.
+    tool_at_end: Option<DVec3>,
+    /// The arm moved more than 2 cm since then: the robot reacted.
+    reacted: bool,
+    /// The earlier gestures' truth, as the judge needs it.
+    pub earlier: Vec<PointerGesture>,
+}
+
+/// How far the tool must move after a gesture for the operator to take it as understood, m.
+const REACTED_M: f64 = 0.02;
+
+impl PointerOperator {
+    pub fn of_scenario(scenario: &Scenario) -> Option<Self> {
+        let cfg = scenario.pointer.clone()?;
+        Some(Self {
+            intended_m: DVec3::from_array(scenario.indicated_point_m()),
+            cfg,
+            scenario_seed: scenario.seed,
+            made: 1,
+            tool_at_end: None,
+            reacted: false,
+            earlier: Vec::new(),
+        })
+    }
+
+    /// At `now_ns`, with the tool at `tool_m`: the next gesture when it is time for one
+    /// (the caller makes it the current one; the old one goes to [`Self::earlier`]).
+    pub fn watch(&mut self, now_ns: u64, current: &PointerGesture, tool_m: DVec3) -> Option<PointerGesture> {
+        if now_ns < current.end_ns() || self.reacted {
+            return None;
+        }
+        let at_end = *self.tool_at_end.get_or_insert(tool_m);
+        if (tool_m - at_end).length() > REACTED_M {
+            self.reacted = true;
+            return None;
+        }
+        if self.made > u64::from(self.cfg.repeats) || now_ns < current.end_ns() + s_to_ns(self.cfg.repeat_after_s) {
+            return None;
+        }
+        let next = PointerGesture::draw_at(&self.cfg, self.intended_m, gesture_seed(self.scenario_seed, self.made), now_ns);
+        self.made += 1;
+        self.tool_at_end = None;
+        Some(next)
+    }
+}
+
 /// The finger's axis line in one view: the images of the fingertip, of a point 0.3 m back
 /// along the axis, and of the aim point (all on the line), pixels (centres at integers).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -216,6 +288,29 @@ mod tests {
         // Up to 2° over a fingertip ~0.1-0.3 m from the plane along the line: mm to ~1 cm.
         let worst = misses.iter().copied().fold(0.0, f64::max);
         assert!(worst > 0.002 && worst < 0.02, "worst miss {worst} m");
+    }
+
+    #[test]
+    fn the_operator_points_again_only_while_the_robot_does_not_react() {
+        let text = include_str!("../../scenarios/point_clutter3.toml").replace("at_s = 80.0", "at_s = 1.0");
+        let scenario = Scenario::parse(&text, std::path::Path::new("p.toml")).unwrap();
+        let first = PointerGesture::of_scenario(&scenario).unwrap();
+        let mut op = PointerOperator::of_scenario(&scenario).unwrap();
+        let still = DVec3::new(0.18, 0.0, 0.14);
+        let s = |t: f64| s_to_ns(t);
+        let end = first.end_ns();
+        assert_eq!(op.watch(end - 1, &first, still), None, "the hand is still there");
+        assert_eq!(op.watch(end, &first, still), None, "a pause first");
+        let second = op.watch(end + s(4.0), &first, still).expect("the robot did not move: point again");
+        assert!(second.azimuth_deg != first.azimuth_deg, "from a new direction");
+        assert_eq!(second.hold_s()[0], (end + s(4.0)) as f64 * 1e-9 + 1.0);
+        // The robot moves after the second gesture: no third.
+        assert_eq!(op.watch(second.end_ns(), &second, still), None);
+        assert_eq!(op.watch(second.end_ns() + s(1.0), &second, still + DVec3::new(0.05, 0.0, 0.0)), None);
+        assert_eq!(op.watch(second.end_ns() + s(5.0), &second, still), None, "the robot reacted");
+        // Without repeats, never.
+        let mut once = PointerOperator::of_scenario(&Scenario::parse(&text.replace("repeats = 2 ", "repeats = 0 "), std::path::Path::new("p.toml")).unwrap()).unwrap();
+        assert_eq!(once.watch(end + s(10.0), &first, still), None);
     }
 
     #[test]

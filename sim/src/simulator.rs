@@ -15,7 +15,7 @@ use crate::cell::follower::Follower;
 use crate::cell::kinematics::{IkError, ToolPose};
 use crate::cell::world::World;
 use crate::events::EventState;
-use crate::pointer::PointerGesture;
+use crate::pointer::{PointerGesture, PointerOperator};
 use crate::referee::judge::{SuccessJudge, Verdict};
 use crate::render::scene::{Attach, Scene};
 use crate::render::{FrameInput, Sensor};
@@ -40,6 +40,8 @@ pub struct Simulator {
     pub follower: Option<Follower>,
     /// The operator's pointing gesture (`[pointer]`), if any.
     pub pointer: Option<PointerGesture>,
+    /// The person pointing: repeats a gesture the robot did not react to.
+    pub operator: Option<PointerOperator>,
     judge: SuccessJudge,
     target: usize,
     reading: ArmReading,
@@ -61,7 +63,8 @@ impl Simulator {
         let events = EventState::new(&scenario);
         let scene = Scene::build(&scenario, &world);
         let pointer = PointerGesture::of_scenario(&scenario);
-        Ok(Self { scenario, world, controller, events, scene, follower: None, pointer, judge, target, reading, steps: 0, frames: 0 })
+        let operator = PointerOperator::of_scenario(&scenario);
+        Ok(Self { scenario, world, controller, events, scene, follower: None, pointer, operator, judge, target, reading, steps: 0, frames: 0 })
     }
 
     /// Simulated time now, ns (exact: steps × 10⁹ / rate).
@@ -128,6 +131,12 @@ impl Simulator {
         self.reading = self.world.arm.read(&self.world.physics);
         let z = self.block_pose(self.target).1.translation.z;
         self.judge.observe(self.now_ns(), z);
+        let now = self.now_ns();
+        if let (Some(op), Some(g)) = (self.operator.as_mut(), self.pointer.as_mut())
+            && let Some(next) = op.watch(now, g, self.reading.tool_m)
+        {
+            op.earlier.push(std::mem::replace(g, next));
+        }
     }
 
     /// Counts a frame whose physics steps were taken one by one with [`Self::step`].

@@ -10,6 +10,10 @@
 //! stands in for the cage positions the daemon measures during calibration (the tracked
 //! plate at each lower cage point), which is where the daemon will take them from.
 //!
+//! The arm stands where the daemon's point phase parks it (`daemon.toml` `[point] park_m`,
+//! default `[0.18, 0, 0.14]`: towards its base, where no hand comes from), not at home in
+//! front of the hand: the daemon moves it there before it watches for a gesture.
+//!
 //! Acceptance: the indicated point within 10 mm of the aim point at the median and within
 //! 20 mm at the 90th percentile; degenerate gestures reported, never answered; the block
 //! nearest the indicated point is the one pointed at. Run with
@@ -28,6 +32,8 @@ use handeye_vision::pointing::{GestureConfig, GestureState, PlaneHomography, Poi
 
 const SCENARIO: &str = include_str!("../../scenarios/point_clutter3.toml");
 const GESTURES: u64 = 30;
+/// The daemon's default `[point] park_m` (`handeye_daemon::config::PointSettings`).
+const POINT_PARK_M: [f64; 3] = [0.18, 0.0, 0.14];
 
 struct Outcome {
     seed: u64,
@@ -68,9 +74,11 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
     for seed in 1..=GESTURES {
         let mut scenario = base.clone();
         assert!(scenario.randomise_layout(seed), "seed {seed}: layout");
-        // The gesture early in the run (the arm is parked at home throughout): only its
+        // The gesture early in the run (the arm stands parked throughout): only its
         // timing changes, not where it points from or at.
         scenario.pointer.as_mut().unwrap().at_s = 1.0;
+        // The arm parked out of the hand's way, as the daemon parks it before watching.
+        scenario.arm.home_m = POINT_PARK_M;
         let mut sim = Simulator::new(scenario).unwrap();
         let r = renderer.get_or_insert_with(|| {
             Renderer::for_scene_with(&sim.scene, &sim.events.cameras, sim.scenario.render.antialias).expect("a Vulkan adapter (lavapipe)")
@@ -196,9 +204,11 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
         let o = &outcomes[(*seed - 1) as usize];
         assert!(matches!(o.state, GestureState::Absent), "seed {seed}: still {:?} at the end of the hold", o.state);
     }
-    // Half the gestures answered today (BENCHMARKS.md, Pointing): the refusals are the
-    // point of the design (never a guess), but fewer answers than this is a regression.
-    assert!(errors.len() >= 15, "only {} of {GESTURES} gestures gave a point", errors.len());
+    // 18 of 30 answered with the arm parked out of the hand's way (17 with it at home in
+    // front of the hand; BENCHMARKS.md, Pointing): the refusals are the point of the design
+    // (never a guess; the operator points again), but fewer answers than this is a
+    // regression.
+    assert!(errors.len() >= 16, "only {} of {GESTURES} gestures gave a point", errors.len());
     assert!(rank(0.5) <= 0.010, "median error {:.1} mm", rank(0.5) * 1e3);
     assert!(rank(0.9) <= 0.020, "90th percentile error {:.1} mm", rank(0.9) * 1e3);
     let wrong: Vec<u64> = outcomes.iter().filter(|o| o.picks_target == Some(false)).map(|o| o.seed).collect();

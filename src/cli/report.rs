@@ -28,6 +28,29 @@ pub fn as_json<T: Serialize + ?Sized>(value: &T) -> String {
     serde_json::to_string(value).unwrap_or_else(|e| format!("({e})"))
 }
 
+/// A run's pointing: the daemon's answer against the judge's truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunPointing {
+    /// Where the hand's finger line really met the working plane (the judge's), m.
+    pub aim_m: Option<[f64; 3]>,
+    /// The daemon's indicated point, m (`null`: no gesture answered).
+    pub indicated_m: Option<[f64; 3]>,
+    /// Distance between the two on the plane, mm.
+    pub error_mm: Option<f64>,
+    /// The answer's one-sigma radius, mm.
+    pub sigma_mm: Option<f64>,
+    /// Gestures that ended (answered or refused), and each refusal in the daemon's words.
+    pub gestures: usize,
+    pub refusals: Vec<String>,
+    /// The block the hand pointed at (the task's target).
+    pub pointed_block: Option<String>,
+    /// The daemon's target trackers went onto the pointed block (`null`: onto none).
+    pub chose_pointed: Option<bool>,
+    /// The gesture tracker's update time, median, µs.
+    pub update_us_p50: Option<f64>,
+}
+
 /// One closed-loop run, merged from the simulator's verdict and the daemon's outcome (see
 /// `handeye run --help`). `None` (`null`) where the process that knows it reported nothing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -64,8 +87,13 @@ pub struct RunSummary {
     pub targeted_block: Option<String>,
     #[serde(deserialize_with = "required")]
     pub targeted_face: Option<String>,
-    /// The operator's indicated point, robot frame, m.
+    /// The operator's indicated point, robot frame, m: the point given to the daemon, or, when
+    /// it watched the pointing hand, the task's point the hand meant.
     pub indicated_point_m: [f64; 3],
+    /// The operator's pointing gesture as the daemon saw it (`null`: it was given a point or
+    /// a hint).
+    #[serde(default)]
+    pub pointing: Option<RunPointing>,
     #[serde(deserialize_with = "required")]
     pub plan_facets: Option<usize>,
     #[serde(deserialize_with = "required")]
@@ -277,6 +305,7 @@ pub(crate) mod tests {
             targeted_block: Some("cube".into()),
             targeted_face: Some("+x".into()),
             indicated_point_m: [0.36, 0.02, 0.06],
+            pointing: None,
             plan_facets: Some(2),
             plan_candidates: Some(1),
             plan_width_mm: Some(40.1),

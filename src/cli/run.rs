@@ -16,7 +16,7 @@ use handeye_sim::referee::report::SimReport;
 use handeye_wire::Domain;
 use handeye_wire::report::{Failure, FailureKind};
 
-use super::report::{as_json, read_report, RunSummary};
+use super::report::{as_json, read_report, RunPointing, RunSummary};
 use super::units::parse_seconds;
 
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
@@ -26,7 +26,12 @@ use super::units::parse_seconds;
 /// pair to the planner, keeps tracking the gripper meanwhile, and executes the grasp site
 /// nearest the operator's indicated point: the scenario's `[task] point_m`, or the named
 /// target block's centre (where an operator would point), on the working plane (the lower
-/// cage points' height). With --hint it uses the operator hint instead (the target facet
+/// cage points' height). When the scenario has a [pointer] (an operator's hand that points
+/// at the target, e.g. scenarios/point_clutter3.toml) the daemon is given no point: it parks
+/// the arm out of the hand's way, watches the gesture in both views and plans for the point
+/// it sees (its `point` phase); --point-m X,Y gives it a point instead, and --given-point the
+/// scenario's own (the ground-truth operator, as for a scenario without a hand). With --hint
+/// it uses the operator hint instead (the target facet
 /// clicked in both views, ±3 px per corner, its depth ±2 mm), which the simulator writes
 /// before its first frame either way (hint.json).
 ///
@@ -47,7 +52,12 @@ use super::units::parse_seconds;
 /// simulator saw), target_source (plan or hint), target_block, target_graspable and
 /// target_ungraspable_reason (the simulator's judge: does the target have a grasp the
 /// thesis's rules allow, on its true geometry; why not, in words), targeted_block,
-/// targeted_face, indicated_point_m, plan_candidates, planner_ms, planning_frames,
+/// targeted_face, indicated_point_m (the task's point: given to the daemon, or the point the
+/// hand meant), pointing (with a [pointer] and no point given: aim_m where the hand's line
+/// really met the plane, the judge's; indicated_m the daemon's point, null when no gesture
+/// was answered; error_mm between them; sigma_mm; gestures and refusals (the daemon's words);
+/// pointed_block, the task's target the hand pointed at, and chose_pointed: whether the
+/// daemon's target trackers went onto it), plan_candidates, planner_ms, planning_frames,
 /// gripper_updates_while_planning, gripper_update_rate_hz (per second of simulated time
 /// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
 /// grasp_plane_error_mm (jaw-centre plane from the block's mid-plane when the jaws closed),
@@ -64,6 +74,8 @@ use super::units::parse_seconds;
 ///   handeye run scenarios/random.toml --seed 7 --randomize --out out/cell7   # a drawn work cell
 ///   handeye run scenarios/pick_cube.toml --seed 7 --json
 ///   handeye run scenarios/pick_cube_bump.toml --hint --out out/bump
+///   handeye run scenarios/point_clutter3.toml --out out/point    # the operator points
+///   handeye run scenarios/point_clutter3.toml --seed 4 --random-layout --given-point --json
 #[derive(Args)]
 #[command(verbatim_doc_comment)]
 pub struct RunArgs {
@@ -101,6 +113,15 @@ pub struct RunArgs {
     /// letting it plan its own grasp.
     #[arg(long)]
     hint: bool,
+    /// The operator's indicated point for the daemon, robot frame, metres: `X,Y` (on the
+    /// working plane, the lowest cage points' height) or `X,Y,Z`. Overrides the scenario's
+    /// point, and the pointing hand's gesture: the daemon does not wait for one.
+    #[arg(long, value_name = "X,Y[,Z]", conflicts_with_all = ["hint", "given_point"], value_parser = super::daemon::parse_point)]
+    point_m: Option<[f64; 3]>,
+    /// With a [pointer] scenario: give the daemon the scenario's own indicated point (the
+    /// ground truth an operator would mean) instead of letting it watch the gesture.
+    #[arg(long, conflicts_with = "hint")]
+    given_point: bool,
     /// Daemon configuration (TOML) to start from; the scenario's cage replaces its
     /// calibration.cage_m.
     #[arg(long, value_name = "FILE")]
@@ -269,7 +290,12 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     // The indicated point as the simulator will lay the scene out (the same seeded code).
     let mut laid_out = scenario.clone();
     super::sim::lay_out(&mut laid_out, &args.scenario, args.seed, args.random_layout, args.randomize, args.disturb)?;
-    let point = laid_out.indicated_point_m();
+    let task_point = laid_out.indicated_point_m();
+    // `X,Y` given: on the working plane (parse_point leaves z at 0 for two numbers).
+    let given = args.point_m.map(|p| if p[2] == 0.0 { [p[0], p[1], task_point[2]] } else { p });
+    // The daemon watches the operator's hand unless it is given a point or a hint.
+    let pointing = laid_out.pointer.is_some() && !args.hint && given.is_none() && !args.given_point;
+    let point = given.unwrap_or(task_point);
     let mut sim = spawn("sim", &sim_args, dir)?;
     let deadline = start + Duration::from_secs_f64(args.timeout_s);
     // The hint appears once the simulator has built the scene (before its first frame).
@@ -298,7 +324,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
             bail!("--hint: there is no hint to give: {}", std::fs::read_to_string(&no_hint).unwrap_or_default().trim());
         }
         daemon_args.extend(["--hint".into(), s(&dir.join("hint.json"))]);
-    } else {
+    } else if !pointing {
         daemon_args.extend(["--point-m".into(), format!("{},{},{}", point[0], point[1], point[2])]);
     }
     let mut daemon = spawn("daemon", &daemon_args, dir)?;
@@ -375,6 +401,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         targeted_block: targeted.map(|t| t.block.clone()),
         targeted_face: targeted.map(|t| t.face.clone()),
         indicated_point_m: point,
+        pointing: pointing.then(|| run_pointing(d.as_ref(), v.as_ref(), targeted.map(|t| t.block.as_str()))),
         plan_facets: plan.map(|p| p.scene.facets.len()),
         plan_candidates: plan.map(|p| p.sites.candidates.len()),
         plan_width_mm: plan.and_then(|p| p.sites.chosen.as_ref()).map(|c| c.grasp.width_mm),
@@ -402,6 +429,32 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
     };
     std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
     Ok(summary)
+}
+
+/// The pointing of a run where the daemon watched the operator's hand: what it answered
+/// against where the hand really aimed (the judge's), and whether it went for that block.
+fn run_pointing(d: Option<&DaemonOutcome>, v: Option<&SimReport>, targeted_block: Option<&str>) -> RunPointing {
+    let p = d.and_then(|d| d.task.pointing.as_ref());
+    let indicated_m = p.and_then(|p| p.indicated_m);
+    let answer = p.and_then(|p| p.gestures.iter().find(|g| g.outcome == "indicated"));
+    // The gesture answered: the one whose hold was on when the answer's frame was taken
+    // (frame ids count simulated frames from 0); without an answer, the last one.
+    let gestures: Vec<&handeye_sim::pointer::PointerTruth> = v.map(|v| v.pointer_earlier.iter().chain(v.pointer.as_ref()).collect()).unwrap_or_default();
+    let frame_s = |id: u64| v.filter(|v| v.frames > 0).map_or(f64::NAN, |v| id as f64 * v.sim_time_s / v.frames as f64);
+    let answered = answer.and_then(|a| gestures.iter().find(|g| (g.hold_s[0]..=g.hold_s[1] + 1.0).contains(&frame_s(a.frame_id))));
+    let aim_m = answered.or(gestures.last()).map(|g| g.aim_m);
+    let pointed_block = v.map(|v| v.target.clone());
+    RunPointing {
+        aim_m,
+        indicated_m,
+        error_mm: aim_m.zip(indicated_m).map(|(a, i)| (a[0] - i[0]).hypot(a[1] - i[1]) * 1e3),
+        sigma_mm: answer.and_then(|g| g.sigma_mm),
+        gestures: p.map_or(0, |p| p.gestures.len()),
+        refusals: p.map(|p| p.gestures.iter().filter(|g| g.outcome != "indicated").map(|g| format!("{}: {}", g.outcome, g.detail)).collect()).unwrap_or_default(),
+        chose_pointed: targeted_block.zip(pointed_block.as_deref()).map(|(t, p)| t == p),
+        pointed_block,
+        update_us_p50: p.map(|p| p.update_us_p50),
+    }
 }
 
 /// A child's report, `None` when it wrote none; one that is there but does not read is an
@@ -463,6 +516,24 @@ fn print_summary(s: &RunSummary) {
             as_json(&s.planning_frames),
             as_json(&s.gripper_updates_while_planning),
             as_json(&s.gripper_update_rate_hz)
+        );
+    }
+    if let Some(p) = &s.pointing {
+        let mm = |v: Option<[f64; 3]>| v.map_or("none".to_string(), |v| format!("({:.3}, {:.3}) m", v[0], v[1]));
+        println!(
+            "  pointing: indicated {} (hand aimed at {}; {} off, sigma {}), {} gesture(s){}; went for {} (pointed at '{}')",
+            mm(p.indicated_m),
+            mm(p.aim_m),
+            num(p.error_mm, " mm"),
+            num(p.sigma_mm, " mm"),
+            p.gestures,
+            if p.refusals.is_empty() { String::new() } else { format!(", refused: {}", p.refusals.join("; ")) },
+            match p.chose_pointed {
+                Some(true) => "the pointed block",
+                Some(false) => "ANOTHER block",
+                None => "no block",
+            },
+            name(&p.pointed_block)
         );
     }
     println!(

@@ -313,6 +313,9 @@ pub fn run(args: SimArgs) -> Result<()> {
             ),
             daemon: runner.watch.clone(),
             pointer: runner.sim.pointer.as_ref().map(|p| p.truth(&runner.sim.events.cameras, runner.sim.now_ns())),
+            pointer_earlier: runner.sim.operator.as_ref().map_or_else(Vec::new, |o| {
+                o.earlier.iter().map(|p| p.truth(&runner.sim.events.cameras, runner.sim.now_ns())).collect()
+            }),
             events: scenario.events.iter().map(|e| e.summary()).collect(),
         };
         if let Some(path) = &args.verdict_out {

@@ -79,6 +79,16 @@ pub fn telemetry_json(t: &Telemetry) -> Value {
         "trackers": trackers,
         "servo_error": t.servo_error.iter().map(|&v| finite_or_null(v)).collect::<Vec<_>>(),
         "servo_steps": t.servo_steps,
+        "pointing": {
+            "state": handeye_wire::PointingState::from_u32(t.pointing_state).map_or("unknown", handeye_wire::PointingState::name),
+            "frame": t.pointing_frame,
+            "update_ns": t.pointing_update_ns,
+            "point_m": t.pointing_point_m.iter().map(|&v| finite_or_null(v)).collect::<Vec<_>>(),
+            "sigma_m": finite_or_null(t.pointing_sigma_m),
+            "crossing_rad": finite_or_null(t.pointing_crossing_rad),
+            "tip_px": t.pointing_tip_px.iter().map(|p| p.iter().map(|&v| finite_or_null(v)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "line_px": t.pointing_line_px.iter().map(|p| p.iter().map(|&v| finite_or_null(v)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+        },
     })
 }
 

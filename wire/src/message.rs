@@ -150,6 +150,13 @@ impl WireMessage for Telemetry {
         if self.planning > 1 {
             return Err(MessageReject::OutOfRange { field: "planning" });
         }
+        if PointingState::from_u32(self.pointing_state).is_none() {
+            return Err(MessageReject::UnknownEnum { field: "pointing_state", value: self.pointing_state });
+        }
+        finite_or_nan("pointing_point_m", &self.pointing_point_m)?;
+        finite_or_nan("pointing_sigma_m", &[self.pointing_sigma_m, self.pointing_crossing_rad])?;
+        finite_or_nan("pointing_tip_px", self.pointing_tip_px.iter().flatten())?;
+        finite_or_nan("pointing_line_px", self.pointing_line_px.iter().flatten())?;
         Ok(())
     }
 }
@@ -505,8 +512,14 @@ mod tests {
         assert_eq!(t.validate().unwrap_err().key(), "range");
         let t = Telemetry { tracker_confidence: [f32::NAN, 0.0, 0.0, 0.0], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "non_finite");
-        let t = Telemetry { phase: 12, ..Telemetry::default() };
+        let t = Telemetry { phase: 13, ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");
+        let t = Telemetry { phase: Phase::Point as u32, pointing_state: PointingState::Indicated as u32, pointing_point_m: [0.4, 0.02], ..Telemetry::default() };
+        assert_eq!(t.validate(), Ok(()));
+        let t = Telemetry { pointing_state: 8, ..Telemetry::default() };
+        assert_eq!(t.validate().unwrap_err().key(), "enum");
+        let t = Telemetry { pointing_line_px: [[0.0, 1.0, f32::INFINITY], [f32::NAN; 3]], ..Telemetry::default() };
+        assert_eq!(t.validate().unwrap_err().key(), "non_finite");
         let t = Telemetry { tracker_state: [0, 1, 2, 3], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");
         let t = Telemetry { tracker_state: [1, 2, 0, 0], tracker_update_ns: [9_000, 8_000, 0, 0], ..Telemetry::default() };

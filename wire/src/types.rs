@@ -10,7 +10,7 @@ use iceoryx2::prelude::*;
 
 /// Version of the wire contract. Bumped on any change to a type in this module; a receiver
 /// rejects samples of any other version.
-pub const WIRE_VERSION: u32 = 3;
+pub const WIRE_VERSION: u32 = 4;
 
 /// Service names (iceoryx2). The same names are used for the matching event services that
 /// wake subscribers (see `wire/README.md`).
@@ -280,6 +280,9 @@ pub enum Phase {
     Stopped = 10,
     /// `handeye daemon --observe`: tracking only, no robot, no commands.
     Observe = 11,
+    /// Waiting for the operator's pointing gesture (after calibrate, before plan; since
+    /// version 4). Appended, so its number does not give the phases' order.
+    Point = 12,
 }
 
 impl Phase {
@@ -297,6 +300,7 @@ impl Phase {
             9 => Self::Failed,
             10 => Self::Stopped,
             11 => Self::Observe,
+            12 => Self::Point,
             _ => return None,
         })
     }
@@ -315,6 +319,78 @@ impl Phase {
             Self::Failed => "failed",
             Self::Stopped => "stopped",
             Self::Observe => "observe",
+            Self::Point => "point",
+        }
+    }
+
+    /// Where the phase comes in a run (`point` between `calibrate` and `plan`, whatever its
+    /// number): what "furthest phase reached" compares. `idle` and `observe` are 0.
+    pub fn order(self) -> u32 {
+        match self {
+            Self::Idle | Self::Observe => 0,
+            Self::AcquireGripper => 1,
+            Self::Calibrate => 2,
+            Self::Point => 3,
+            Self::Plan => 4,
+            Self::AcquireTarget => 5,
+            Self::Servo => 6,
+            Self::Grasp => 7,
+            Self::Lift => 8,
+            Self::Done => 9,
+            Self::Failed => 10,
+            Self::Stopped => 11,
+        }
+    }
+}
+
+/// [`Telemetry::pointing_state`]: what the pointing gesture showed on the frame the pointing
+/// result is for (since version 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum PointingState {
+    /// Not watching for a gesture (outside the `point` phase, or not started yet).
+    Off = 0,
+    /// Watching: no arm in view.
+    Absent = 1,
+    /// An arm in view, not yet still.
+    Moving = 2,
+    /// Still, and the two plane lines meet at `pointing_point_m`.
+    Indicated = 3,
+    /// Refused: the finger's line lies nearly in a plane through both cameras.
+    Degenerate = 4,
+    /// Refused: the point's uncertainty is over the limit.
+    Uncertain = 5,
+    /// Refused: in view too long without holding still.
+    Unsteady = 6,
+    /// Refused: no finger line in one view or both.
+    NoLine = 7,
+}
+
+impl PointingState {
+    pub fn from_u32(raw: u32) -> Option<Self> {
+        Some(match raw {
+            0 => Self::Off,
+            1 => Self::Absent,
+            2 => Self::Moving,
+            3 => Self::Indicated,
+            4 => Self::Degenerate,
+            5 => Self::Uncertain,
+            6 => Self::Unsteady,
+            7 => Self::NoLine,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Absent => "absent",
+            Self::Moving => "moving",
+            Self::Indicated => "indicated",
+            Self::Degenerate => "degenerate",
+            Self::Uncertain => "uncertain",
+            Self::Unsteady => "unsteady",
+            Self::NoLine => "no_line",
         }
     }
 }
@@ -368,6 +444,26 @@ pub struct Telemetry {
     /// Frames dropped before reaching the daemon so far: the gaps in the frame ids it saw
     /// (since version 3).
     pub dropped_frames: u64,
+    /// The pointing update (both views) whose result this cycle took, nanoseconds of the
+    /// pointing thread's `CLOCK_MONOTONIC`; 0 when none was taken (since version 4).
+    pub pointing_update_ns: u64,
+    /// A [`PointingState`] value.
+    pub pointing_state: u32,
+    /// The frame id the pointing result is for (it lags the cycle by a fixed number of
+    /// frames), low 32 bits; 0 with `pointing_state` off.
+    pub pointing_frame: u32,
+    /// The indicated point on the working plane, robot `x, y`, metres; NaN unless
+    /// `pointing_state` is indicated.
+    pub pointing_point_m: [f32; 2],
+    /// Its one-sigma radius, metres (uncertain: the refused value), and the angle at which
+    /// the two plane lines cross, radians (degenerate: the refused value); NaN when unknown.
+    pub pointing_sigma_m: f32,
+    pub pointing_crossing_rad: f32,
+    /// The fingertip in the left and right views, pixels; NaN when not seen.
+    pub pointing_tip_px: [[f32; 2]; 2],
+    /// The finger's axis line in the left and right views, `a u + b v + c = 0` with
+    /// `a² + b² = 1`; NaN when not fitted.
+    pub pointing_line_px: [[f32; 3]; 2],
 }
 
 impl Default for Telemetry {
@@ -389,6 +485,14 @@ impl Default for Telemetry {
             planning: 0,
             reason: [0; REASON_LEN],
             dropped_frames: 0,
+            pointing_update_ns: 0,
+            pointing_state: PointingState::Off as u32,
+            pointing_frame: 0,
+            pointing_point_m: [f32::NAN; 2],
+            pointing_sigma_m: f32::NAN,
+            pointing_crossing_rad: f32::NAN,
+            pointing_tip_px: [[f32::NAN; 2]; 2],
+            pointing_line_px: [[f32::NAN; 3]; 2],
         }
     }
 }
@@ -431,7 +535,8 @@ mod tests {
         assert_eq!(std::mem::size_of::<StereoHeader>(), 4 * 2 + 8 * 3 + 4 * 4);
         assert_eq!(std::mem::size_of::<RobotState>(), 4 * 2 + 8 * 4 + 4 * (3 + 1 + 5 + 1 + 2));
         assert_eq!(std::mem::size_of::<RobotCommand>(), 4 * 2 + 8 * 3 + 4 * (3 + 1 + 1 + 1));
-        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96 + 8);
+        assert_eq!(std::mem::size_of::<Telemetry>(), 4 * 2 + 8 * 4 + 8 * 4 * 2 + 4 * 4 * 2 + 4 * 4 * 8 * 2 + 4 * 6 + 4 * 2 + 96 + 8 + 8 + 4 * 2 + 4 * 2 + 4 * 2 + 4 * 4 + 4 * 6);
+        assert_eq!(std::mem::size_of::<Telemetry>(), 600);
     }
 
     #[test]
@@ -451,10 +556,16 @@ mod tests {
         }
         assert_eq!(CommandKind::from_u32(5), None);
         assert_eq!(PixelFormat::from_u32(0), None);
-        for p in 0..12 {
+        for p in 0..13 {
             assert_eq!(Phase::from_u32(p).map(|x| x as u32), Some(p));
         }
-        assert_eq!(Phase::from_u32(12), None);
+        assert_eq!(Phase::from_u32(13), None);
+        for p in 0..8 {
+            assert_eq!(PointingState::from_u32(p).map(|x| x as u32), Some(p));
+        }
+        assert_eq!(PointingState::from_u32(8), None);
+        // The point phase comes between calibrate and plan, whatever its number.
+        assert!(Phase::Calibrate.order() < Phase::Point.order() && Phase::Point.order() < Phase::Plan.order());
     }
 
     #[test]

@@ -177,7 +177,7 @@ impl HardLoop {
         let cmd = self.decide(frame_index, frame_id, tick, left, right, states);
         let cmd = self.refuse_blind_moves(cmd, phase_before, &states);
         let phase = self.phase.phase();
-        if !matches!(phase, Phase::Failed | Phase::Stopped) && (phase as u32) > (self.phase_reached as u32) {
+        if !matches!(phase, Phase::Failed | Phase::Stopped) && phase.order() > self.phase_reached.order() {
             self.phase_reached = phase;
         }
         // The first cycle after the run failed or stopped stops the arm explicitly.
@@ -214,20 +214,21 @@ impl HardLoop {
             return Cmd::STOP;
         }
         let phase = self.phase.phase();
+        let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         if self.recovery.is_some() {
-            let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
+            self.phase.keep_watching(&mut self.mission, &cycle); // the operator's gesture goes on
             return self.hold_and_search(phase, &cycle);
         }
         if let Err(fault) = check_trackers(&self.mission.cfg.safety, phase, &states, &self.mission.trackers) {
             // A tracker the phase needs is lost: hold the arm and search for it (unless
             // holding is switched off).
             if self.start_hold(phase, frame_id, tick.now_ns, &states) {
+                self.phase.keep_watching(&mut self.mission, &cycle);
                 return Cmd::STOP;
             }
             self.stop_reason(Phase::Stopped, fault);
             return Cmd::STOP;
         }
-        let cycle = Cycle { frame_index, time_ns: tick.now_ns, frame_id, robot: &robot, rejected_seq: self.rejected_seq, seq: self.seq + 1, left, right, states };
         match self.phase.step(&mut self.mission, &cycle) {
             Step::Stay(c) | Step::Next(c) => c,
             Step::Fail(fault) => {
@@ -299,6 +300,7 @@ impl HardLoop {
         t.servo_steps = self.mission.servo.steps();
         t.dropped_frames = self.clock.dropped_frames();
         t.planning = u32::from(self.mission.worker.busy());
+        self.mission.pointing.fill_telemetry(t);
         match &self.failure {
             Some(failure) => t.set_reason(&failure.detail),
             None => t.set_reason(self.mission.reporting.status()),
@@ -398,6 +400,7 @@ impl HardLoop {
                 planning: m.planning.stats(),
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
+                pointing: m.pointing.summary(),
                 stop_frame_id: self.stopped_at_frame(),
                 holds: HoldRecord {
                     recoveries: self.recoveries(),

@@ -1,17 +1,20 @@
 //! The state that lives across phases, in parts with one owner each: the shared context
 //! (configuration, plate template, trackers, worker), [`Targeting`], the
-//! [`CalibrationRecord`], the [`ServoRecord`], the [`PlanRecord`] and [`Reporting`]. The
+//! [`CalibrationRecord`], the [`ServoRecord`], the [`PlanRecord`], the [`PointingRecord`]
+//! and [`Reporting`]. The
 //! phases borrow the parts they work on; the hard loop reads them for telemetry and the
 //! outcome.
 
 pub mod calibration;
 pub mod plan_record;
+pub mod pointing;
 pub mod reporting;
 pub mod servo_record;
 pub mod targeting;
 
 pub use calibration::{Calibration, CalibrationRecord, CalibrationStats};
 pub use plan_record::{PlanRecord, PlanningStats};
+pub use pointing::{PointingRecord, PointingSummary};
 pub use reporting::{ReportRequests, Reporting};
 pub use servo_record::{ServoRecord, ServoTraceRow};
 pub use targeting::{TargetSource, TargetSpec, Targeting};
@@ -37,6 +40,8 @@ pub struct Mission {
     pub calibration: CalibrationRecord,
     pub servo: ServoRecord,
     pub planning: PlanRecord,
+    /// What the point phase saw (the operator's gestures).
+    pub pointing: PointingRecord,
     pub reporting: Reporting,
 }
 
@@ -55,6 +60,7 @@ impl Mission {
             calibration: CalibrationRecord::default(),
             servo,
             planning: PlanRecord::default(),
+            pointing: PointingRecord::default(),
             reporting: Reporting::default(),
         })
     }

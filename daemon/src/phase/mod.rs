@@ -1,5 +1,6 @@
-//! The daemon's phases (METHOD.md §1, §3, §6): acquire gripper → calibrate → plan (unless
-//! an operator hint names the target) → acquire target → servo → grasp → lift → done, each
+//! The daemon's phases (METHOD.md §1, §3, §4, §6): acquire gripper → calibrate → point
+//! (unless an indicated point or a hint was given: the operator points at the block) → plan
+//! (unless an operator hint names the target) → acquire target → servo → grasp → lift → done, each
 //! with a time-out and a typed failure; `failed` and `stopped` end a run. One file per
 //! phase; what they share lives in modules of its own ([`step`]: commands, steps, moves;
 //! [`job`]: worker jobs; [`crate::mission`]: the state across phases). A phase never
@@ -16,6 +17,7 @@ pub mod calibrate;
 pub mod grasp;
 pub mod job;
 pub mod plan;
+pub mod point;
 pub mod servo;
 pub mod step;
 
@@ -31,6 +33,7 @@ use crate::mission::Mission;
 pub enum PhaseState {
     AcquireGripper(acquire_gripper::AcquireGripper),
     Calibrate(calibrate::Calibrate),
+    Point(point::PointPhase),
     Plan(plan::PlanPhase),
     AcquireTarget(acquire_target::AcquireTarget),
     Servo(Box<servo::ServoPhase>),
@@ -46,6 +49,7 @@ impl PhaseState {
         match self {
             Self::AcquireGripper(_) => Phase::AcquireGripper,
             Self::Calibrate(_) => Phase::Calibrate,
+            Self::Point(_) => Phase::Point,
             Self::Plan(_) => Phase::Plan,
             Self::AcquireTarget(_) => Phase::AcquireTarget,
             Self::Servo(_) => Phase::Servo,
@@ -92,6 +96,10 @@ impl PhaseState {
                     Resumed::Resumed
                 }
             }
+            Self::Point(p) => {
+                p.resume(held_ns);
+                Resumed::Resumed
+            }
             Self::Plan(p) => {
                 p.resume(held_ns);
                 Resumed::Resumed
@@ -116,11 +124,21 @@ impl PhaseState {
         true
     }
 
+    /// On a frame the arm holds for lost trackers: the point phase goes on watching the
+    /// operator's gesture (a hand in front of the plate is why it was lost); the other phases
+    /// wait.
+    pub fn keep_watching(&mut self, m: &mut Mission, c: &Cycle<'_>) {
+        if let Self::Point(p) = self {
+            p.keep_watching(m, c.frame_index, c.frame_id, c.time_ns, c.left, c.right);
+        }
+    }
+
     /// Runs the current phase for one cycle; on `Next` builds the following phase.
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         let step = match self {
             Self::AcquireGripper(p) => p.step(m, c),
             Self::Calibrate(p) => p.step(m, c),
+            Self::Point(p) => p.step(m, c),
             Self::Plan(p) => p.step(m, c),
             Self::AcquireTarget(p) => p.step(m, c),
             Self::Servo(p) => p.step(m, c),
@@ -146,7 +164,9 @@ impl PhaseState {
                 Self::AcquireGripper(_) => Self::Calibrate(calibrate::Calibrate::new(c.time_ns)),
                 // With a target from the operator hint there is nothing to plan.
                 Self::Calibrate(_) if m.targeting.target().is_some() => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
-                Self::Calibrate(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
+                // Without an indicated point the operator is asked to point.
+                Self::Calibrate(_) if m.targeting.indicated_m().is_none() => Self::Point(point::PointPhase::new(c.time_ns)),
+                Self::Calibrate(_) | Self::Point(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
                 Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),

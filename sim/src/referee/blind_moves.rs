@@ -2,7 +2,7 @@
 //! command (`MoveTo`, `MoveBy`) is matched with the telemetry of the frame it answered (the
 //! daemon publishes that telemetry first, but the two may be read in either order), and
 //! counted when a tracker the daemon's phase moves the arm by was not tracking on that
-//! frame: the plate's (left, right) in calibrate, plan and acquire_target, all four in the
+//! frame: the plate's (left, right) in calibrate, point, plan and acquire_target, all four in the
 //! servo.
 
 use std::collections::VecDeque;
@@ -15,7 +15,7 @@ const REMEMBERED: usize = 64;
 /// Telemetry slots (gripper left, right, target left, right) a phase moves the arm by.
 fn slots_used(phase: Phase) -> &'static [usize] {
     match phase {
-        Phase::Calibrate | Phase::Plan | Phase::AcquireTarget => &[0, 1],
+        Phase::Calibrate | Phase::Point | Phase::Plan | Phase::AcquireTarget => &[0, 1],
         Phase::Servo => &[0, 1, 2, 3],
         _ => &[],
     }

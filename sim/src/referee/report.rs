@@ -117,6 +117,10 @@ pub struct SimReport {
     /// The operator's pointing gesture and where it really aimed (`[pointer]` scenarios).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pointer: Option<crate::pointer::PointerTruth>,
+    /// The gestures before it, when the operator pointed again (`[pointer] repeats`), oldest
+    /// first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pointer_earlier: Vec<crate::pointer::PointerTruth>,
     /// The scripted disturbances of the run, in words (the scenario's `[[events]]` and a
     /// `--disturb` one), so a batch shows what each run had to ride out.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]

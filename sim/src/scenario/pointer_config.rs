@@ -43,6 +43,19 @@ pub struct PointerConfig {
     /// Albedo of the skin (finger and hand), 0..1; the sleeve is darker.
     #[serde(default = "default_pointer_shade")]
     pub shade: f64,
+    /// How many times the operator points again when the robot did not react: a gesture
+    /// after which the arm stays where it was (within 2 cm) for `repeat_after_s` after the
+    /// hand has gone is repeated, from a new direction drawn from the seed. The simulator
+    /// watches only the arm, as a person would, never the daemon's telemetry.
+    #[serde(default)]
+    pub repeats: u32,
+    /// Pause between the hand going and the next gesture, s.
+    #[serde(default = "default_pointer_repeat_after")]
+    pub repeat_after_s: f64,
+}
+
+fn default_pointer_repeat_after() -> f64 {
+    4.0
 }
 
 fn default_pointer_enter_s() -> f64 {
@@ -104,6 +117,12 @@ impl PointerConfig {
         if !f(self.shade, 0.0, 1.0) {
             return Err(("shade", "must be an albedo 0..1".into()));
         }
+        if self.repeats > 100 {
+            return Err(("repeats", "must be 0..100".into()));
+        }
+        if !f(self.repeat_after_s, 0.5, 600.0) {
+            return Err(("repeat_after_s", "must be 0.5..600 s (the robot needs a moment to react)".into()));
+        }
         Ok(())
     }
 }
@@ -124,6 +143,7 @@ mod tests {
             ("elevation_deg = [35.0, 70.0]", "elevation_deg = [70.0, 35.0]", "pointer.elevation_deg"),
             ("aim_error_deg = 2.0", "aim_error_deg = -1.0", "pointer.aim_error_deg"),
             ("hold_s = 3.0", "hold_s = 0.0", "pointer.hold_s"),
+            ("repeat_after_s = 4.0", "repeat_after_s = 0.0", "pointer.repeat_after_s"),
             ("at_s = 80.0", "at_s = 80.0\nfinger = 1", "finger"),
         ] {
             let err = Scenario::parse(&POINT.replace(from, to), Path::new("point.toml")).unwrap_err().to_string();

@@ -34,6 +34,12 @@ mod summary;
 /// the operator hint), and the simulator judges success from ground truth: the task's
 /// target lifted 50 mm and held 2 s.
 ///
+/// With a [pointer] scenario (scenarios/point_clutter3.toml) the daemon watches the
+/// operator's hand point at the seed's block and plans for the point it sees; the table then
+/// says how many gestures it answered, whether it went for the pointed block, how far its
+/// point was from where the hand really aimed (the judge's), and per run what happened.
+/// --given-point gives it the scenario's point instead (the ground-truth operator).
+///
 /// With --randomize each seed draws the whole work cell from the scenario's [randomize]
 /// ranges (default: issue 20's): the camera pair (1.2-1.9 m away, 14-30° vergence, 25-45°
 /// elevation, 30-50° horizontal field of view, a little roll), the light, the table's and
@@ -88,6 +94,8 @@ mod summary;
 ///   handeye batch --randomize --seeds 20 --first-seed 1000 --out out/cells
 ///   handeye batch scenarios/random.toml --randomize --seeds 5   # its own [randomize] ranges
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --disturb  # one random disturbance a run
+///   handeye batch scenarios/point_clutter3.toml --seeds 30      # the operator points
+///   handeye batch scenarios/point_clutter3.toml --seeds 30 --given-point   # the same, told the point
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --json --out out/batch
 ///   handeye batch scenarios --seeds 5 --jobs 2
 ///   handeye batch scenarios/clutter3.toml --seeds 30 --config fast.toml   # other daemon settings
@@ -134,6 +142,11 @@ pub struct BatchArgs {
     /// Give the daemon the operator hint instead of letting it plan (`handeye run --hint`).
     #[arg(long)]
     hint: bool,
+    /// With a [pointer] scenario: give every daemon the scenario's indicated point instead of
+    /// letting it watch the hand (`handeye run --given-point`): the ground-truth operator,
+    /// to compare pointing against on the same seeds.
+    #[arg(long, conflicts_with = "hint")]
+    given_point: bool,
     /// Kill a run after this many seconds of wall time (`handeye run --timeout-s`).
     #[arg(long, default_value_t = 300.0, value_name = "S", value_parser = parse_seconds)]
     timeout_s: f64,
@@ -191,6 +204,9 @@ fn run_flags(args: &BatchArgs) -> Vec<String> {
     let mut flags: Vec<String> = vec![layout.into(), "--json".into(), "--timeout-s".into(), args.timeout_s.to_string()];
     if args.hint {
         flags.push("--hint".into());
+    }
+    if args.given_point {
+        flags.push("--given-point".into());
     }
     if args.disturb {
         flags.push("--disturb".into());

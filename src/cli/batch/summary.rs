@@ -179,6 +179,7 @@ pub(super) fn table(report: &BatchResult) -> String {
             let _ = writeln!(s, "not judged (no simulator report): {} runs", j.unjudged_runs);
         }
     }
+    pointing_lines(&mut s, report);
     if !report.all.failure_list.is_empty() {
         let _ = writeln!(s, "\nfailures by phase and kind:");
         for g in &report.all.failure_list {
@@ -191,6 +192,46 @@ pub(super) fn table(report: &BatchResult) -> String {
     }
     let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report.all.wall_s.unwrap_or(0.0));
     s
+}
+
+/// The runs in which the daemon watched the operator's hand (issue 19): how many gestures it
+/// answered, whether it went for the block pointed at, how far its point was from where the
+/// hand really aimed, and per run what happened.
+fn pointing_lines(s: &mut String, report: &BatchResult) {
+    use std::fmt::Write;
+    let runs: Vec<(&RunDetail, &crate::cli::report::RunPointing)> =
+        report.runs_detail.iter().filter_map(|r| Some((r, r.summary.as_ref()?.pointing.as_ref()?))).collect();
+    if runs.is_empty() {
+        return;
+    }
+    let answered: Vec<_> = runs.iter().filter(|(_, p)| p.indicated_m.is_some()).collect();
+    let chose = |want: bool| runs.iter().filter(|(_, p)| p.chose_pointed == Some(want)).count();
+    let mut errors: Vec<f64> = answered.iter().filter_map(|(_, p)| p.error_mm).collect();
+    errors.sort_by(f64::total_cmp);
+    let rank = |q: f64| (!errors.is_empty()).then(|| errors[((q * errors.len() as f64).ceil() as usize).clamp(1, errors.len()) - 1]);
+    let mm = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1} mm"));
+    let _ = writeln!(
+        s,
+        "\npointing: {} runs watched the hand, {} answered ({} gestures refused before); went for the pointed block in {}, another block in {}; point off the hand's aim: median {}, p90 {}, max {}",
+        runs.len(),
+        answered.len(),
+        runs.iter().map(|(_, p)| p.refusals.len()).sum::<usize>(),
+        chose(true),
+        chose(false),
+        mm(rank(0.5)),
+        mm(rank(0.9)),
+        mm(errors.last().copied())
+    );
+    for (r, p) in &runs {
+        let what = match (p.indicated_m, p.chose_pointed) {
+            (Some(_), Some(true)) => format!("answered {} off, went for the pointed block '{}'", mm(p.error_mm), p.pointed_block.as_deref().unwrap_or("?")),
+            (Some(_), Some(false)) => format!("answered {} off, went for ANOTHER block than '{}'", mm(p.error_mm), p.pointed_block.as_deref().unwrap_or("?")),
+            (Some(_), None) => format!("answered {} off, no block targeted", mm(p.error_mm)),
+            (None, _) => "not answered".to_string(),
+        };
+        let refused = if p.refusals.is_empty() { String::new() } else { format!("; refused first: {}", p.refusals.join("; ")) };
+        let _ = writeln!(s, "  {}#{}: {what}{refused}", r.scenario, r.seed);
+    }
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@ mod transport;
 mod tracker;
 mod render;
 mod planner;
+mod pointing;
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -27,6 +28,8 @@ enum BenchWhat {
     Render(render::RenderArgs),
     /// Planner time per stage on a 640x480 stereo pair.
     Planner(planner::PlannerArgs),
+    /// Pointing gesture tracker time per stereo frame (issue 19).
+    Pointing(pointing::PointingArgs),
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -35,6 +38,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchWhat::Tracker(args) => tracker::run(args),
         BenchWhat::Render(args) => render::run(args),
         BenchWhat::Planner(args) => planner::run(args),
+        BenchWhat::Pointing(args) => pointing::run(args),
     }
 }
 
