@@ -98,8 +98,9 @@ pub struct TaskRecord {
     pub holds: HoldRecord,
 }
 
-/// The arm's holds for lost trackers over the run (issue 18).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+/// The arm's holds for lost trackers over the run (issue 18); `handeye run` carries it into
+/// `run.json` (`recovery`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct HoldRecord {
     /// Tracker losses recovered from: the arm held, the lost contours were found again and
     /// the phase resumed (a knocked camera is one).

@@ -16,7 +16,7 @@ use handeye_sim::referee::report::SimReport;
 use handeye_wire::Domain;
 use handeye_wire::report::{Failure, FailureKind};
 
-use super::report::{as_json, read_report, RunSummary};
+use super::report::{as_json, holds_brief, loss_text, read_report, RunSummary};
 use super::units::parse_seconds;
 
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
@@ -52,7 +52,11 @@ use super::units::parse_seconds;
 /// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
 /// grasp_plane_error_mm (jaw-centre plane from the block's mid-plane when the jaws closed),
 /// loop_us_p50, loop_us_p99, deadline_misses, calibration_residual_px, sim_frames, wall_s,
-/// seed, report (folder or null).
+/// seed, report (folder or null), recovery (the arm's holds for lost trackers, from
+/// daemon.json: recoveries, held_s, recalibrations, moves_refused, and losses, each with
+/// its phase, frame id, what (which tracker and why), held_s, search_passes, relapses,
+/// outcome (recovered, or why not) and resumed (what the phase did then); null when the
+/// daemon reported nothing).
 ///
 /// The children are always cleaned up: on Ctrl-C, on failure, and after --timeout-s (a hung
 /// child is killed). Their stderr is kept in the report folder (sim.stderr.log,
@@ -399,6 +403,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         seed: v.as_ref().map(|v| v.seed),
         domain: domain.to_string(),
         report: args.out.is_some().then(|| dir.display().to_string()),
+        recovery: d.as_ref().map(|d| d.task.holds.clone()),
     };
     std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
     Ok(summary)
@@ -438,6 +443,16 @@ fn failure(d: Option<&DaemonOutcome>, v: Option<&SimReport>, note: Option<String
         return Failure::new(phase, FailureKind::Process, format!("the daemon reported nothing: {}", tail(&dir.join("daemon.stderr.log"))));
     }
     Failure::new(phase, FailureKind::NotLifted, "the target was not lifted and held (ground truth)")
+}
+
+/// The arm's holds for lost trackers: each loss, its search and how it ended (issue 18).
+fn print_holds(h: &handeye_daemon::outcome::HoldRecord) {
+    if let Some(brief) = holds_brief(h) {
+        println!("  holds: {brief}");
+    }
+    for l in &h.losses {
+        println!("    {}", loss_text(l));
+    }
 }
 
 fn print_summary(s: &RunSummary) {
@@ -481,6 +496,9 @@ fn print_summary(s: &RunSummary) {
         as_json(&s.sim_frames),
         num(Some(s.wall_s), " s wall")
     );
+    if let Some(h) = s.recovery.as_ref() {
+        print_holds(h);
+    }
     if let Some(r) = &s.report {
         println!("  report: {r}");
     }
