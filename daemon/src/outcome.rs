@@ -91,6 +91,10 @@ pub struct TaskRecord {
     /// Targets tried: the plan's next grasp site is tried when one cannot be acquired.
     pub target_attempts: u32,
     pub grip_width_mm: Option<f64>,
+    /// The block moved in the jaws while lifted, in words: the jaws' opening strayed from the
+    /// width they closed to on it (`phase/grasp.rs`); `None` when it held steady.
+    #[serde(default)]
+    pub held_block_moved: Option<String>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
     /// The holds for lost trackers (flattened: the keys stay top-level).
@@ -184,6 +188,7 @@ mod tests {
                 planning: None,
                 target_attempts: 1,
                 grip_width_mm: None,
+                held_block_moved: None,
                 stop_frame_id: Some(u64::MAX),
                 holds: HoldRecord::default(),
             },
@@ -201,7 +206,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "held_block_moved", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

@@ -124,6 +124,11 @@ pub struct RunSummary {
     /// out by files written before it existed (read as `null`).
     #[serde(default)]
     pub recovery: Option<HoldRecord>,
+    /// The block moved in the jaws while lifted, in words (the daemon's `held_block_moved`:
+    /// the jaws' opening strayed from the width they closed to on it); `null` when it held
+    /// steady, or the file predates the field.
+    #[serde(default)]
+    pub held_block_moved: Option<String>,
 }
 
 /// One loss in words, for the run's report and the batch's table: "servo, frame 812: target
@@ -364,6 +369,7 @@ pub(crate) mod tests {
                 }],
                 recalibrations: 0,
             }),
+            held_block_moved: None,
         }
     }
 
@@ -396,7 +402,9 @@ pub(crate) mod tests {
         // A run.json written before the field existed reads, as `null`.
         let mut old = value.clone();
         old.as_object_mut().unwrap().remove("recovery");
-        assert_eq!(serde_json::from_value::<RunSummary>(old).unwrap().recovery, None);
+        old.as_object_mut().unwrap().remove("held_block_moved");
+        let old = serde_json::from_value::<RunSummary>(old).unwrap();
+        assert_eq!((old.recovery, old.held_block_moved), (None, None));
         // A renamed key inside it is refused with its name, not dropped.
         let text = serde_json::to_string(&s).unwrap().replace("\"search_passes\"", "\"search_pass\"");
         let err = serde_json::from_str::<RunSummary>(&text).unwrap_err().to_string();

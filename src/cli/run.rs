@@ -56,7 +56,8 @@ use super::units::parse_seconds;
 /// daemon.json: recoveries, held_s, recalibrations, moves_refused, and losses, each with
 /// its phase, frame id, what (which tracker and why), held_s, search_passes, relapses,
 /// outcome (recovered, or why not) and resumed (what the phase did then); null when the
-/// daemon reported nothing).
+/// daemon reported nothing), held_block_moved (the block moved in the jaws while lifted,
+/// in words, from the jaws' opening; null when it held steady).
 ///
 /// The children are always cleaned up: on Ctrl-C, on failure, and after --timeout-s (a hung
 /// child is killed). Their stderr is kept in the report folder (sim.stderr.log,
@@ -404,6 +405,7 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         domain: domain.to_string(),
         report: args.out.is_some().then(|| dir.display().to_string()),
         recovery: d.as_ref().map(|d| d.task.holds.clone()),
+        held_block_moved: d.as_ref().and_then(|d| d.task.held_block_moved.clone()),
     };
     std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
     Ok(summary)
@@ -498,6 +500,9 @@ fn print_summary(s: &RunSummary) {
     );
     if let Some(h) = s.recovery.as_ref() {
         print_holds(h);
+    }
+    if let Some(words) = &s.held_block_moved {
+        println!("  lift: {words}");
     }
     if let Some(r) = &s.report {
         println!("  report: {r}");

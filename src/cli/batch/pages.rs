@@ -31,6 +31,7 @@ fn page_rows(s: Option<&RunSummary>) -> Vec<(&'static str, String)> {
         ("final_angle_error_deg", field(&|s| as_json(&s.final_angle_error_deg))),
         ("grasp_plane_error_mm", field(&|s| as_json(&s.grasp_plane_error_mm))),
         ("max_lift_mm", field(&|s| as_json(&s.max_lift_mm))),
+        ("held_block_moved", field(&|s| as_json(&s.held_block_moved))),
         ("loop_us_p50", field(&|s| as_json(&s.loop_us_p50))),
         ("loop_us_p99", field(&|s| as_json(&s.loop_us_p99))),
         ("calibration_residual_px", field(&|s| as_json(&s.calibration_residual_px))),
