@@ -42,6 +42,19 @@ fn an_occluder_crossing_mid_servo_is_waited_out_and_the_cube_lifted() {
     assert!(stop <= hidden + 3, "hidden on frame {hidden}, Stop answered frame {stop}\n{why}");
     let (n, held_s) = recovered(&r);
     assert!(n >= 1 && held_s > 0.0, "recoveries {n}, held {held_s:.2} s\n{why}");
+    // The run's own report (run.json, the summary printed) names the loss: the target's
+    // tracker lost in the servo, searched for and recovered, and the time held.
+    let rec = &r.summary["recovery"];
+    let named = rec["losses"].as_array().is_some_and(|losses| {
+        losses.iter().any(|l| {
+            l["phase"] == "servo"
+                && l["what"].as_str().is_some_and(|w| w.contains("target tracker"))
+                && l["outcome"].as_str().is_some_and(|o| o.starts_with("recovered"))
+                && l["search_passes"].as_u64().is_some()
+        })
+    });
+    assert!(named, "run.json does not name the recovered target loss: {rec}\n{why}");
+    assert_eq!(rec["held_s"].as_f64(), Some(held_s), "run.json's held time is the daemon's\n{why}");
 }
 
 /// The cube is pushed 25 mm and turned 15° mid-servo: the servo starts again on the facet

@@ -95,6 +95,10 @@ pub struct TaskRecord {
     /// update time (`None`: the daemon was given its point or a hint).
     #[serde(default)]
     pub pointing: Option<crate::mission::PointingSummary>,
+    /// The block moved in the jaws while lifted, in words: the jaws' opening strayed from the
+    /// width they closed to on it (`phase/grasp.rs`); `None` when it held steady.
+    #[serde(default)]
+    pub held_block_moved: Option<String>,
     /// Frame id answered by the `Stop` command (`18446744073709551615` = outside a frame).
     pub stop_frame_id: Option<u64>,
     /// The holds for lost trackers (flattened: the keys stay top-level).
@@ -102,8 +106,9 @@ pub struct TaskRecord {
     pub holds: HoldRecord,
 }
 
-/// The arm's holds for lost trackers over the run (issue 18).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+/// The arm's holds for lost trackers over the run (issue 18); `handeye run` carries it into
+/// `run.json` (`recovery`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct HoldRecord {
     /// Tracker losses recovered from: the arm held, the lost contours were found again and
     /// the phase resumed (a knocked camera is one).
@@ -188,6 +193,7 @@ mod tests {
                 target_attempts: 1,
                 grip_width_mm: None,
                 pointing: None,
+                held_block_moved: None,
                 stop_frame_id: Some(u64::MAX),
                 holds: HoldRecord::default(),
             },
@@ -205,7 +211,7 @@ mod tests {
         let mut expected = vec![
             "success", "phase_reached", "final_phase", "failure_reason", "failure", "servo_steps", "loop_us_p50", "loop_us_p99",
             "loop_us_max", "loop_us_mean", "deadline_us", "deadline_misses", "stale_frame_commands", "cycles", "robot_states", "tracker_update", "camera", "calibration",
-            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "pointing", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
+            "target_source", "plan", "planning", "target_attempts", "grip_width_mm", "pointing", "held_block_moved", "stop_frame_id", "recoveries", "held_s", "moves_refused", "losses", "recalibrations",
             "servo_trace", "wall_s",
         ];
         expected.sort_unstable();

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use handeye_daemon::mission::TargetSource;
+use handeye_daemon::outcome::{HoldRecord, LossRecord};
 use handeye_wire::report::required;
 use handeye_wire::report::{Failure, FailureKind};
 use serde::de::DeserializeOwned;
@@ -145,6 +146,56 @@ pub struct RunSummary {
     /// The report folder (`--out`), `null` without one.
     #[serde(deserialize_with = "required")]
     pub report: Option<String>,
+    /// The daemon's holds for lost trackers (its `daemon.json`): each loss (phase, which
+    /// tracker, why), the search (passes, relapses), how it ended and how the phase resumed,
+    /// the time the arm held, recalibrations. `null` when the daemon reported nothing; left
+    /// out by files written before it existed (read as `null`).
+    #[serde(default)]
+    pub recovery: Option<HoldRecord>,
+    /// The block moved in the jaws while lifted, in words (the daemon's `held_block_moved`:
+    /// the jaws' opening strayed from the width they closed to on it); `null` when it held
+    /// steady, or the file predates the field.
+    #[serde(default)]
+    pub held_block_moved: Option<String>,
+}
+
+/// One loss in words, for the run's report and the batch's table: "servo, frame 812: target
+/// tracker (left view) lost: ...; held 1.23 s, 3 search passes, 1 relapse; recovered; resumed:
+/// ...". The daemon's `what` names the tracker and its reason, `outcome` how the hold ended
+/// (or why it did not recover).
+pub fn loss_text(l: &LossRecord) -> String {
+    let plural = |n: u32, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    let mut text = format!(
+        "{}, frame {}: {}; held {:.2} s, {}, {}; {}",
+        l.phase,
+        l.frame_id,
+        l.what,
+        l.held_s,
+        plural(l.search_passes, "search pass", "search passes"),
+        plural(l.relapses, "relapse", "relapses"),
+        l.outcome
+    );
+    if !l.resumed.is_empty() {
+        text.push_str("; resumed: ");
+        text.push_str(&l.resumed);
+    }
+    text
+}
+
+/// A run's holds in one line ("2 losses, 1 recovered, held 3.40 s, 1 recalibration"); `None`
+/// when the arm never held.
+pub fn holds_brief(h: &HoldRecord) -> Option<String> {
+    if h.losses.is_empty() && h.held_s <= 0.0 {
+        return None;
+    }
+    let mut text = format!("{} loss{}, {} recovered, held {:.2} s", h.losses.len(), if h.losses.len() == 1 { "" } else { "es" }, h.recoveries, h.held_s);
+    if h.recalibrations > 0 {
+        text.push_str(&format!(", {} recalibration{}", h.recalibrations, if h.recalibrations == 1 { "" } else { "s" }));
+    }
+    if h.moves_refused > 0 {
+        text.push_str(&format!(", {} moves on a lost track refused", h.moves_refused));
+    }
+    Some(text)
 }
 
 /// A batch's result (see `handeye batch --help`): the totals over every run, the same per
@@ -330,6 +381,24 @@ pub(crate) mod tests {
             seed: Some(1),
             domain: "run-1".into(),
             report: None,
+            recovery: Some(HoldRecord {
+                recoveries: 1,
+                held_s: 1.25,
+                moves_refused: 0,
+                losses: vec![LossRecord {
+                    phase: "servo".into(),
+                    frame_id: 812,
+                    what: "target tracker (left view) lost: support 0.21 below 0.35".into(),
+                    held_s: 1.25,
+                    outcome: "recovered".into(),
+                    shifts_px: [None, None, Some([3.0, -1.5]), None],
+                    resumed: "servo from fresh frames".into(),
+                    search_passes: 3,
+                    relapses: 1,
+                }],
+                recalibrations: 0,
+            }),
+            held_block_moved: None,
         }
     }
 
@@ -340,6 +409,35 @@ pub(crate) mod tests {
         assert_eq!(serde_json::from_str::<RunSummary>(&text).unwrap(), s);
         // `null` stays `null`: a value that is not there is written, not left out.
         assert!(text.contains("\"final_plane_error_mm\":null"), "{text}");
+    }
+
+    #[test]
+    fn a_run_summary_carries_each_loss_and_the_hold() {
+        let s = summary();
+        let value = serde_json::to_value(&s).unwrap();
+        let loss = &value["recovery"]["losses"][0];
+        assert_eq!(loss["phase"], "servo");
+        assert!(loss["what"].as_str().unwrap().starts_with("target tracker (left view) lost"), "{loss}");
+        assert_eq!((loss["search_passes"].as_u64(), loss["relapses"].as_u64()), (Some(3), Some(1)));
+        assert_eq!(loss["outcome"], "recovered");
+        assert_eq!(value["recovery"]["held_s"], 1.25);
+        let h = s.recovery.as_ref().unwrap();
+        assert_eq!(
+            loss_text(&h.losses[0]),
+            "servo, frame 812: target tracker (left view) lost: support 0.21 below 0.35; held 1.25 s, 3 search passes, 1 relapse; recovered; resumed: servo from fresh frames"
+        );
+        assert_eq!(holds_brief(h).as_deref(), Some("1 loss, 1 recovered, held 1.25 s"));
+        assert_eq!(holds_brief(&HoldRecord::default()), None);
+        // A run.json written before the field existed reads, as `null`.
+        let mut old = value.clone();
+        old.as_object_mut().unwrap().remove("recovery");
+        old.as_object_mut().unwrap().remove("held_block_moved");
+        let old = serde_json::from_value::<RunSummary>(old).unwrap();
+        assert_eq!((old.recovery, old.held_block_moved), (None, None));
+        // A renamed key inside it is refused with its name, not dropped.
+        let text = serde_json::to_string(&s).unwrap().replace("\"search_passes\"", "\"search_pass\"");
+        let err = serde_json::from_str::<RunSummary>(&text).unwrap_err().to_string();
+        assert!(err.contains("search_pass"), "{err}");
     }
 
     #[test]

@@ -16,7 +16,7 @@ use handeye_sim::referee::report::SimReport;
 use handeye_wire::Domain;
 use handeye_wire::report::{Failure, FailureKind};
 
-use super::report::{as_json, read_report, RunPointing, RunSummary};
+use super::report::{as_json, holds_brief, loss_text, read_report, RunPointing, RunSummary};
 use super::units::parse_seconds;
 
 /// Run one closed-loop grasp scenario: `handeye sim SCENARIO --lockstep` and `handeye daemon`
@@ -62,7 +62,12 @@ use super::units::parse_seconds;
 /// while the planner worked, as the simulator saw the telemetry), servo_steps, final_plane_error_mm, final_angle_error_deg,
 /// grasp_plane_error_mm (jaw-centre plane from the block's mid-plane when the jaws closed),
 /// loop_us_p50, loop_us_p99, deadline_misses, calibration_residual_px, sim_frames, wall_s,
-/// seed, report (folder or null).
+/// seed, report (folder or null), recovery (the arm's holds for lost trackers, from
+/// daemon.json: recoveries, held_s, recalibrations, moves_refused, and losses, each with
+/// its phase, frame id, what (which tracker and why), held_s, search_passes, relapses,
+/// outcome (recovered, or why not) and resumed (what the phase did then); null when the
+/// daemon reported nothing), held_block_moved (the block moved in the jaws while lifted,
+/// in words, from the jaws' opening; null when it held steady).
 ///
 /// The children are always cleaned up: on Ctrl-C, on failure, and after --timeout-s (a hung
 /// child is killed). Their stderr is kept in the report folder (sim.stderr.log,
@@ -426,6 +431,8 @@ fn run_in(args: &RunArgs, scenario: &Scenario, dir: &Path, start: Instant) -> Re
         seed: v.as_ref().map(|v| v.seed),
         domain: domain.to_string(),
         report: args.out.is_some().then(|| dir.display().to_string()),
+        recovery: d.as_ref().map(|d| d.task.holds.clone()),
+        held_block_moved: d.as_ref().and_then(|d| d.task.held_block_moved.clone()),
     };
     std::fs::write(dir.join("run.json"), serde_json::to_string_pretty(&summary)?)?;
     Ok(summary)
@@ -493,6 +500,16 @@ fn failure(d: Option<&DaemonOutcome>, v: Option<&SimReport>, note: Option<String
     Failure::new(phase, FailureKind::NotLifted, "the target was not lifted and held (ground truth)")
 }
 
+/// The arm's holds for lost trackers: each loss, its search and how it ended (issue 18).
+fn print_holds(h: &handeye_daemon::outcome::HoldRecord) {
+    if let Some(brief) = holds_brief(h) {
+        println!("  holds: {brief}");
+    }
+    for l in &h.losses {
+        println!("    {}", loss_text(l));
+    }
+}
+
 fn print_summary(s: &RunSummary) {
     let num = |x: Option<f64>, unit: &str| x.map_or("n/a".to_string(), |x| format!("{x:.2}{unit}"));
     let name = |x: &Option<String>| x.clone().unwrap_or_else(|| "?".to_string());
@@ -552,6 +569,12 @@ fn print_summary(s: &RunSummary) {
         as_json(&s.sim_frames),
         num(Some(s.wall_s), " s wall")
     );
+    if let Some(h) = s.recovery.as_ref() {
+        print_holds(h);
+    }
+    if let Some(words) = &s.held_block_moved {
+        println!("  lift: {words}");
+    }
     if let Some(r) = &s.report {
         println!("  report: {r}");
     }

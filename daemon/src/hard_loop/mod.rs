@@ -401,6 +401,7 @@ impl HardLoop {
                 target_attempts: m.targeting.attempts(),
                 grip_width_mm: m.servo.grip_width_m().map(|w| w * 1e3),
                 pointing: m.pointing.summary(),
+                held_block_moved: m.servo.held_block_moved().map(str::to_owned),
                 stop_frame_id: self.stopped_at_frame(),
                 holds: HoldRecord {
                     recoveries: self.recoveries(),

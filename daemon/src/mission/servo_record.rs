@@ -24,12 +24,14 @@ pub struct ServoRecord {
     error: [f64; 6],
     /// Jaw opening after closing on the target, m.
     grip_width_m: Option<f64>,
+    /// How the block moved in the jaws while lifted, in words (`phase/grasp.rs`).
+    held_block_moved: Option<String>,
 }
 
 impl ServoRecord {
     /// Room for `max_steps` steps (and two more).
     pub fn new(max_steps: u32) -> Self {
-        Self { trace: Vec::with_capacity(max_steps as usize + 2), steps: 0, error: [f64::NAN; 6], grip_width_m: None }
+        Self { trace: Vec::with_capacity(max_steps as usize + 2), steps: 0, error: [f64::NAN; 6], grip_width_m: None, held_block_moved: None }
     }
 
     /// A new servo starts: the trace and the step count begin again.
@@ -74,5 +76,13 @@ impl ServoRecord {
 
     pub fn grip_width_m(&self) -> Option<f64> {
         self.grip_width_m
+    }
+
+    pub fn set_held_block_moved(&mut self, words: String) {
+        self.held_block_moved = Some(words);
+    }
+
+    pub fn held_block_moved(&self) -> Option<&str> {
+        self.held_block_moved.as_deref()
     }
 }

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 
 use super::shard::BatchFile;
 use super::summary::{table, Outcome};
-use crate::cli::report::{as_json, BatchResult, RunSummary};
+use crate::cli::report::{as_json, holds_brief, loss_text, BatchResult, RunSummary};
 
 /// The run page's table: a summary's fields as its JSON shows them (`null` throughout when
 /// the run printed none).
@@ -31,12 +31,23 @@ fn page_rows(s: Option<&RunSummary>) -> Vec<(&'static str, String)> {
         ("final_angle_error_deg", field(&|s| as_json(&s.final_angle_error_deg))),
         ("grasp_plane_error_mm", field(&|s| as_json(&s.grasp_plane_error_mm))),
         ("max_lift_mm", field(&|s| as_json(&s.max_lift_mm))),
+        ("held_block_moved", field(&|s| as_json(&s.held_block_moved))),
         ("loop_us_p50", field(&|s| as_json(&s.loop_us_p50))),
         ("loop_us_p99", field(&|s| as_json(&s.loop_us_p99))),
         ("calibration_residual_px", field(&|s| as_json(&s.calibration_residual_px))),
         ("sim_frames", field(&|s| as_json(&s.sim_frames))),
         ("wall_s", field(&|s| as_json(&s.wall_s))),
     ]
+}
+
+/// The run page's account of the arm's holds for lost trackers (issue 18): each loss, which
+/// tracker and why, the search, how it ended and how the phase resumed; empty when the arm
+/// never held.
+fn holds_section(s: Option<&RunSummary>) -> String {
+    let Some(h) = s.and_then(|s| s.recovery.as_ref()) else { return String::new() };
+    let Some(brief) = holds_brief(h) else { return String::new() };
+    let items: String = h.losses.iter().map(|l| format!("<li>{}</li>", esc(&loss_text(l)))).collect();
+    format!("<h2>Holds for lost trackers</h2><p>{}</p><ol>{items}</ol>", esc(&brief))
 }
 
 fn esc(text: &str) -> String {
@@ -48,14 +59,14 @@ pub(super) fn write_pages(out: &Path, outcomes: &[Outcome], report: &BatchResult
     use std::fmt::Write;
     let style = "<style>body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:left}.ok{color:#070}.bad{color:#b00}img{max-width:100%;border:1px solid #ccc;margin:4px 0}</style>";
     let mut index = format!("<!doctype html><meta charset=utf-8><title>handeye batch</title>{style}<h1>handeye batch</h1><pre>{}</pre>", esc(&table(report)));
-    let _ = write!(index, "<table><tr><th>scenario</th><th>seed</th><th>result</th><th>phase</th><th>reason</th><th>target</th><th>grasped facet</th><th>servo steps</th><th>wall (s)</th></tr>");
+    let _ = write!(index, "<table><tr><th>scenario</th><th>seed</th><th>result</th><th>phase</th><th>reason</th><th>target</th><th>grasped facet</th><th>servo steps</th><th>holds</th><th>wall (s)</th></tr>");
     for o in outcomes {
         let rel = format!("{}/seed-{}/index.html", o.job.name, o.job.seed);
         let s = o.summary.as_ref();
         let text = |field: fn(&RunSummary) -> &Option<String>| s.and_then(|s| field(s).clone()).unwrap_or_default();
         let _ = write!(
             index,
-            "<tr><td>{}</td><td><a href=\"{rel}\">{}</a></td><td class={}>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} {}</td><td>{}</td><td>{:.1}</td></tr>",
+            "<tr><td>{}</td><td><a href=\"{rel}\">{}</a></td><td class={}>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} {}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
             esc(&o.job.name),
             o.job.seed,
             if o.success { "ok" } else { "bad" },
@@ -66,6 +77,7 @@ pub(super) fn write_pages(out: &Path, outcomes: &[Outcome], report: &BatchResult
             esc(&text(|s| &s.targeted_block)),
             esc(&text(|s| &s.targeted_face)),
             as_json(&s.and_then(|s| s.servo_steps)),
+            esc(&s.and_then(|s| s.recovery.as_ref()).and_then(holds_brief).unwrap_or_default()),
             o.wall_s
         );
         if let Some(dir) = &o.job.out {
@@ -102,7 +114,9 @@ fn write_run_page(dir: &Path, o: &Outcome, style: &str) -> Result<()> {
     for (key, value) in page_rows(o.summary.as_ref()) {
         let _ = write!(page, "<tr><th>{key}</th><td>{}</td></tr>", esc(&value));
     }
-    let _ = write!(page, "</table><p>Files: <a href=\"run.json\">run.json</a> <a href=\"plan.json\">plan.json</a> <a href=\"daemon.json\">daemon.json</a> <a href=\"sim.json\">sim.json</a> <a href=\"daemon.stderr.log\">daemon log</a> <a href=\"sim.stderr.log\">sim log</a></p>");
+    let _ = write!(page, "</table>");
+    page.push_str(&holds_section(o.summary.as_ref()));
+    let _ = write!(page, "<p>Files: <a href=\"run.json\">run.json</a> <a href=\"plan.json\">plan.json</a> <a href=\"daemon.json\">daemon.json</a> <a href=\"sim.json\">sim.json</a> <a href=\"daemon.stderr.log\">daemon log</a> <a href=\"sim.stderr.log\">sim log</a></p>");
     let caption = |name: &str| -> String {
         let label = name.trim_end_matches(".png").trim_start_matches(|c: char| c.is_ascii_digit() || c == '_').replace('_', " ");
         match label.as_str() {
@@ -140,4 +154,20 @@ pub(super) fn write_report(file: &BatchFile, outcomes: &[Outcome], out: Option<&
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_page_lists_each_loss_and_a_calm_run_none() {
+        let s = crate::cli::report::tests::summary();
+        let html = holds_section(Some(&s));
+        assert!(html.contains("<p>1 loss, 1 recovered, held 1.25 s</p>"), "{html}");
+        assert!(html.contains("<li>servo, frame 812: target tracker (left view) lost"), "{html}");
+        assert!(html.contains("3 search passes, 1 relapse; recovered; resumed: servo from fresh frames</li>"), "{html}");
+        assert_eq!(holds_section(Some(&RunSummary { recovery: None, ..s.clone() })), "");
+        assert_eq!(holds_section(None), "");
+    }
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use handeye_wire::report::{Failure, FailureKind};
 
-use crate::cli::report::{BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, JudgedTallies, RunDetail, RunSummary};
+use crate::cli::report::{holds_brief, loss_text, BatchGroup, BatchResult, FailedRun, FailureGroup, GroupRun, JudgedTallies, RunDetail, RunSummary};
 
 /// One run to make.
 #[derive(Debug, Clone)]
@@ -190,6 +190,7 @@ pub(super) fn table(report: &BatchResult) -> String {
             }
         }
     }
+    s.push_str(&holds_table(report));
     let _ = writeln!(s, "\nwall time: {:.1} s in all; median servo steps over the runs that lifted; run wall: median per run", report.all.wall_s.unwrap_or(0.0));
     s
 }
@@ -232,6 +233,25 @@ fn pointing_lines(s: &mut String, report: &BatchResult) {
         let refused = if p.refusals.is_empty() { String::new() } else { format!("; refused first: {}", p.refusals.join("; ")) };
         let _ = writeln!(s, "  {}#{}: {what}{refused}", r.scenario, r.seed);
     }
+}
+
+/// The runs in which the arm held for lost trackers: each loss, its search and how it ended
+/// (issue 18); empty when no arm held.
+fn holds_table(report: &BatchResult) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    for r in &report.runs_detail {
+        let Some(h) = r.summary.as_ref().and_then(|s| s.recovery.as_ref()) else { continue };
+        let Some(brief) = holds_brief(h) else { continue };
+        if s.is_empty() {
+            let _ = writeln!(s, "\nholds for lost trackers:");
+        }
+        let _ = writeln!(s, "  {}#{}: {brief}", r.scenario, r.seed);
+        for l in &h.losses {
+            let _ = writeln!(s, "          {}", loss_text(l));
+        }
+    }
+    s
 }
 
 #[cfg(test)]
@@ -338,6 +358,18 @@ mod tests {
         assert!(t.contains("graspable targets:     4 runs, 2 lifted (50%), 1 wrong refusals"), "{t}");
         assert!(t.contains("ungraspable targets:   4 runs, 2 correct refusals (50%), 1 attempts"), "{t}");
         assert!(t.contains("3 x plan: refused (c#3, c#5, c#6)"), "{t}");
+    }
+
+    #[test]
+    fn the_table_names_each_loss_its_search_and_how_it_ended() {
+        let mut held = outcome(7, None, Some(4.0));
+        held.summary = Some(crate::cli::report::tests::summary());
+        let mut calm = outcome(8, None, Some(4.0));
+        calm.summary = Some(crate::cli::report::RunSummary { recovery: Some(Default::default()), ..crate::cli::report::tests::summary() });
+        let t = table(&summarise(&[held, calm], 10.0, None));
+        assert!(t.contains("holds for lost trackers:\n  c#7: 1 loss, 1 recovered, held 1.25 s\n"), "{t}");
+        assert!(t.contains("servo, frame 812: target tracker (left view) lost: support 0.21 below 0.35; held 1.25 s, 3 search passes, 1 relapse; recovered"), "{t}");
+        assert!(!t.contains("c#8"), "a run that never held is not listed\n{t}");
     }
 
     #[test]
