@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
+use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, refusal_grounded, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
@@ -253,8 +253,13 @@ pub struct PlanOutput {
     pub images: [ImageBuf; 2],
     /// With no target: why the pointed block (the facets reconstructed near the indicated
     /// point) has no grasp the rules allow, in words, from this plan's own facets and
-    /// rejections; `None` when nothing was reconstructed near the point.
+    /// rejections; `None` when nothing was reconstructed near the point, or when what was
+    /// reconstructed fails only rules that say what the cameras saw (see `unjudged`).
     pub refusal: Option<String>,
+    /// With no target and no refusal: the pointed block was seen, but no face of it that the
+    /// grasp rules can judge (only its top, or only faces turned past the view-angle rule),
+    /// in words. Not a refusal: the judge on true geometry may well find a grasp.
+    pub unjudged: Option<String>,
 }
 
 /// A short name for a rejection reason.
@@ -526,7 +531,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         Err(e) => {
             summary.sites.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
             summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None };
+            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None, unjudged: None };
         }
     };
     // No site near the point, or only zero-width ones (the thesis's thin wall; among
@@ -616,16 +621,34 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     };
     let target = chosen.as_ref().map(planned);
     let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
-    let refusal = if target.is_none() { pointed_block_refusal(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
+    let verdict = if target.is_none() { pointed_block_verdict(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
+    let (refusal, unjudged) = match verdict {
+        Some(PointedBlock::Refused(why)) => (Some(why), None),
+        Some(PointedBlock::Unjudged(why)) => (None, Some(why)),
+        None => (None, None),
+    };
     summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-    PlanOutput { summary, target, alternatives, images: req.images, refusal }
+    PlanOutput { summary, target, alternatives, images: req.images, refusal, unjudged }
+}
+
+/// What the plan says of the pointed block when it has no grasp.
+#[derive(Debug, Clone, PartialEq)]
+enum PointedBlock {
+    /// It fails rules the judge on true geometry also applies: a refusal, with why.
+    Refused(String),
+    /// Only what was seen of it fails (no vertical face, no top edge, faces turned from the
+    /// cameras): what was seen, in words.
+    Unjudged(String),
 }
 
 /// Why the pointed block has no grasp, in words ([`why_no_grasp`]): the block is the
 /// connected component of the facet whose centre lies nearest the indicated point in plan
 /// view, within `max_distance_m` (without a point, every facet). `None` when no facet is
-/// that near: nothing was seen there, which is not a refusal but a failure to see.
-fn pointed_block_refusal(ps: &PlannedScene, rejected: &[Rejection], indicated: Option<&Vector3<f64>>, config: &GraspConfig, max_distance_m: f64) -> Option<String> {
+/// that near: nothing was seen there, which is not a refusal but a failure to see. A
+/// refusal only when a facet of the block fails a rule the judge also applies
+/// ([`refusal_grounded`]); a block seen only from the top, or only by faces the view-angle
+/// rule leaves out, is [`PointedBlock::Unjudged`].
+fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: Option<&Vector3<f64>>, config: &GraspConfig, max_distance_m: f64) -> Option<PointedBlock> {
     let facets = &ps.scene.facets;
     let component = match indicated {
         Some(p) => {
@@ -640,7 +663,8 @@ fn pointed_block_refusal(ps: &PlannedScene, rejected: &[Rejection], indicated: O
         None => None,
     };
     let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
-    Some(why_no_grasp(rejected, name, config))
+    let why = why_no_grasp(rejected, name, config);
+    Some(if refusal_grounded(rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
 }
 
 #[cfg(test)]

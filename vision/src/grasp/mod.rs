@@ -48,7 +48,7 @@ pub mod scene;
 #[cfg(test)]
 mod tests;
 
-pub use explain::why_no_grasp;
+pub use explain::{refusal_grounded, why_no_grasp};
 pub use scene::{hypothesise_front_faces, scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};
