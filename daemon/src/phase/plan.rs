@@ -201,6 +201,7 @@ impl PlanPhase {
                         max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.scene.arm_clearance_m,
                         max_distance_m: p.grasp.max_site_distance_m,
                         join_m: p.scene.join_m,
+                        table_z_m: m.cfg.grasp.table_z_m,
                         front_faces_to_table_z_m: p.scene.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
                         rear_edges_from_image: p.scene.rear_edges_from_image,
                     },

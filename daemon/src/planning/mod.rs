@@ -33,7 +33,7 @@ use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
-pub use pixels::{edge_support, mask_and_fill};
+pub use pixels::{bottom_edge_offset, edge_support, mask_and_fill};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -48,6 +48,11 @@ pub const MIN_SOLID_WIDTH_M: f64 = 0.005;
 
 /// `PlannedScene::edge_matches` entry of a rear edge found in the images (no planner match).
 pub const IMAGE_REAR_EDGE: usize = usize::MAX;
+
+/// How far below the table a reconstructed corner may lie before its facet is taken for a
+/// false match, m: the plan's heights are good to a few millimetres with the pinhole
+/// cameras (seed 106's top face at 30-32 mm on a 30 mm cube).
+const BELOW_TABLE_M: f64 = 0.015;
 
 /// Everything the worker needs for one plan.
 pub struct PlanRequest {
@@ -85,6 +90,9 @@ pub struct SceneLimits {
     pub max_height_m: f64,
     /// Features closer than this in 3-D are one object, m.
     pub join_m: f64,
+    /// The table's height, robot frame, m: the pinhole cameras' epipolar geometry is fitted
+    /// for the heights of objects on it (`EpipolarGeometry::correct_from_cameras`).
+    pub table_z_m: f64,
     /// Hypothesise the vertical faces below top faces' front edges that the planner missed,
     /// down to the table at this height (robot frame, m); `None`: do not.
     pub front_faces_to_table_z_m: Option<f64>,
@@ -442,6 +450,11 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let mut geo = EpipolarGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
+        // Match along the cameras' own epipolar lines, not only the cage's linear constraint
+        // (blocks near the image edges, below the cage, are off it by more than the tolerance).
+        let z = req.scene.table_z_m;
+        let rms = geo.correct_from_cameras(req.images[0].width, req.images[0].height, &[z, z + 0.03, z + 0.06]);
+        tracing::debug!(?rms, "epipolar correction from the pinhole cameras");
     }
     summary.geometry.projective_residual_px = geo.projective.as_ref().map(|p| p.residual_rms_px);
     let t0 = Instant::now();
@@ -452,6 +465,19 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.counts.planes = plan.planes.len();
     summary.geometry.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
     let mut ps = scene_from_plan(&plan, toward, req.scene.max_height_m, req.scene.join_m);
+    // A facet reaching well below the table is a false match, not a block (the corners of a
+    // face matched to the wrong edges in the other view): its "steep top edge" would refuse
+    // a block for a slope it does not have.
+    let mut k = 0;
+    while k < ps.facets.len() {
+        if ps.scene.facets[k].polygon_m.iter().any(|p| p.z < req.scene.table_z_m - BELOW_TABLE_M) {
+            ps.facets.remove(k);
+            ps.scene.facets.remove(k);
+            *summary.sites.rejected_by_reason.entry("below_table".into()).or_insert(0) += 1;
+        } else {
+            k += 1;
+        }
+    }
     let planned_facets = ps.facets.len();
     if let Some(table_z) = req.scene.front_faces_to_table_z_m {
         let project = |p: &Vector3<f64>| {
@@ -460,16 +486,25 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             ok.then(|| px.map(|q| [q[0] + PLANNER_FROM_TRACKER_PX, q[1] + PLANNER_FROM_TRACKER_PX]))
         };
         hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.scene.join_m);
-        // A hypothesised face must show its bottom edge, against the table, in both views:
-        // one hung from a top edge where the block does not go straight down (the tall leg
-        // of an L over its low leg) has none there.
+        // A hypothesised face must show its bottom edge, against the table, in both views,
+        // near where the model projects it (the model is extrapolated below the cage and
+        // may be a few pixels off there): one hung from a top edge where the block does not
+        // go straight down (the tall leg of an L over its low leg) has none there. Its image
+        // outline's bottom corners go where the edge is, for the target trackers.
         let mut k = planned_facets;
         while k < ps.facets.len() {
             let src = &ps.facets[k];
-            let seen = [(&req.images[0], &src.left_px), (&req.images[1], &src.right_px)]
+            let offsets: Option<Vec<[f64; 2]>> = [(&req.images[0], &src.left_px), (&req.images[1], &src.right_px)]
                 .iter()
-                .all(|(img, poly)| edge_support(img, to_tracker_px(poly[0]), to_tracker_px(poly[1])) >= 0.6);
-            if seen {
+                .map(|(img, poly)| bottom_edge_offset(img, &poly.iter().copied().map(to_tracker_px).collect::<Vec<_>>(), 0.6))
+                .collect();
+            if let Some(offsets) = offsets {
+                let src = &mut ps.facets[k];
+                for (poly, off) in [&mut src.left_px, &mut src.right_px].into_iter().zip(offsets) {
+                    for corner in poly.iter_mut().take(2) {
+                        *corner = [corner[0] + off[0], corner[1] + off[1]];
+                    }
+                }
                 k += 1;
             } else {
                 ps.facets.remove(k);
