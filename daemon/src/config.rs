@@ -191,7 +191,10 @@ pub struct AcquireConfig {
     pub converge_frames: u32,
     /// Smallest tracker confidence score accepted at the end of the convergence.
     pub min_score: f64,
-    /// Smallest plate image, px² (each view).
+    /// Smallest plate image a converged plate tracker may have, px² (each view), whatever
+    /// the plate's size as found: the least a contour tracker can follow (an 8 x 8 px
+    /// plate). Above it, half the area the locator found counts
+    /// (`gripper::least_plate_area_px2`).
     pub min_plate_area_px2: f64,
     /// Whole phase time-out, s.
     pub timeout_s: f64,
@@ -199,7 +202,7 @@ pub struct AcquireConfig {
 
 impl Default for AcquireConfig {
     fn default() -> Self {
-        Self { settle_frames: 4, converge_frames: 15, min_score: 0.5, min_plate_area_px2: 300.0, timeout_s: 20.0 }
+        Self { settle_frames: 4, converge_frames: 15, min_score: 0.5, min_plate_area_px2: 64.0, timeout_s: 20.0 }
     }
 }
 

@@ -176,6 +176,17 @@ pub enum PlateError {
     NoMotion,
 }
 
+/// The least image area, px², that a converged plate tracker may have in a view: half of
+/// the plate's area as the locator found it in the same view ([`find_plate`]: the plate's
+/// measured image size, whatever the focal length and distance), and never under
+/// `floor_px2`, the smallest plate a contour tracker can follow. A tracker that shrank
+/// below half the plate it started on has collapsed onto something smaller. A fixed area
+/// (it was 300 px²) cannot serve: the plate is ~2000 px² at the shipped 1800 px focal
+/// length and ~150-250 px² at the randomised cells' 30-50° field of view and 1.9 m.
+pub fn least_plate_area_px2(found_px2: f64, floor_px2: f64) -> f64 {
+    (0.5 * found_px2).max(floor_px2)
+}
+
 /// Finds the plate's light rectangle above the moving fingers in `image` (a frame with the
 /// arm still): Otsu threshold in a window above the fingers, the bright connected regions
 /// that do not touch the window's edge (the plate's dark border encloses its light
@@ -443,5 +454,14 @@ mod tests {
         // A corner count that differs between views falls back to per-view frames.
         let quad = ContourTracker::new(cfg, &[[90.0, 310.0], [185.0, 280.0], [180.0, 200.0], [95.0, 190.0]]).unwrap();
         assert_eq!(stereo_frame(&l, &quad).right, facet_frame(&quad));
+    }
+
+    #[test]
+    fn the_least_plate_area_scales_with_the_plate_found() {
+        // The shipped cameras' plate (~2000 px²) must keep 1000 px²; a randomised cell's
+        // small plate (200 px²) 100 px²; never under the tracker's floor.
+        assert_eq!(least_plate_area_px2(2000.0, 64.0), 1000.0);
+        assert_eq!(least_plate_area_px2(200.0, 64.0), 100.0);
+        assert_eq!(least_plate_area_px2(90.0, 64.0), 64.0);
     }
 }

@@ -39,11 +39,26 @@ pub struct LocateConfig {
     /// More than this fraction of the image changed by more than `min_threshold`: the whole
     /// view changed.
     pub max_changed_fraction: f64,
+    /// When nothing moved above the threshold, the difference is looked at again averaged
+    /// over 3 x 3 pixels (a third of the noise) at this many of its own noise sigmas (measured
+    /// the same way), at least `faint_min_threshold` grey levels: dark fingers over a dark
+    /// table change the image by a few grey levels, under the 12 that the plain difference
+    /// needs, yet over a finger's whole area.
+    pub faint_noise_sigmas: f64,
+    pub faint_min_threshold: f64,
 }
 
 impl Default for LocateConfig {
     fn default() -> Self {
-        Self { noise_sigmas: 5.0, min_threshold: 12, min_area_px: 20, max_area_fraction: 0.05, max_changed_fraction: 0.25 }
+        Self {
+            noise_sigmas: 5.0,
+            min_threshold: 12,
+            min_area_px: 20,
+            max_area_fraction: 0.05,
+            max_changed_fraction: 0.25,
+            faint_noise_sigmas: 4.0,
+            faint_min_threshold: 2.0,
+        }
     }
 }
 
@@ -195,13 +210,64 @@ pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &Loca
         return Err(LocateError::TooMuchMotion { percent: 100.0 * changed as f64 / n as f64 });
     }
 
-    // Opening removes speckle and hairlines; closing then mends small gaps in a finger.
     let mut mask: Vec<bool> = diff.iter().map(|&d| d > threshold).collect();
+    let (mut blobs, mut all, mut dropped) = regions(&mut mask, w, h, config);
+    let (mut threshold, mut noise_sigma) = (threshold, noise_sigma);
+    if blobs.is_empty() {
+        // Faint motion: the signed difference averaged over 3 x 3 pixels, at 4x its grey
+        // levels to keep fractions, thresholded at its own measured noise. Each pixel's
+        // difference is clipped to the plain threshold first: a change that large and this
+        // small in extent is speckle (the plain pass would have found a finger), and must not
+        // grow into a 3 x 3 blob.
+        const SCALE: f64 = 4.0;
+        let clip = i32::from(threshold);
+        let signed = |x: usize, y: usize| (i32::from(open.row(y)[x]) - i32::from(closed.row(y)[x])).clamp(-clip, clip);
+        let mut smooth = vec![0u8; n];
+        let mut hist = [0usize; 256];
+        for y in 1..h.saturating_sub(1) {
+            for x in 1..w.saturating_sub(1) {
+                let mut sum = 0;
+                for dy in 0..3 {
+                    for dx in 0..3 {
+                        sum += signed(x + dx - 1, y + dy - 1);
+                    }
+                }
+                let v = (SCALE * f64::from(sum.abs()) / 9.0).round().min(255.0) as u8;
+                smooth[y * w + x] = v;
+                hist[v as usize] += 1;
+            }
+        }
+        let inner = (w.saturating_sub(2) * h.saturating_sub(2)).max(1);
+        let mut seen = 0;
+        let median = (0..256).find(|&v| {
+            seen += hist[v];
+            2 * seen >= inner
+        });
+        let sigma = median.unwrap_or(0) as f64 / 0.6745;
+        let cut = (config.faint_noise_sigmas * sigma).max(SCALE * config.faint_min_threshold).ceil().min(254.0) as u8;
+        let mut faint: Vec<bool> = smooth.iter().map(|&d| d > cut).collect();
+        (blobs, all, dropped) = regions(&mut faint, w, h, config);
+        if blobs.is_empty() {
+            return Err(LocateError::NoMotion { threshold });
+        }
+        threshold = (f64::from(cut) / SCALE).ceil() as u8;
+        noise_sigma = sigma / SCALE;
+    }
+    blobs.sort_by_key(|b| std::cmp::Reverse(b.area_px));
+    let (centre_px, axis_rad, length_px, width_px) = all.shape();
+    Ok(ImageMotion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
+}
+
+/// The regions of `mask` (consumed): opened and closed, 8-connected, those of plausible size
+/// kept, with the moments of all kept pixels and the count of dropped regions.
+fn regions(mask: &mut [bool], w: usize, h: usize, config: &LocateConfig) -> (Vec<Blob>, Moments, usize) {
+    let n = w * h;
+    // Opening removes speckle and hairlines; closing then mends small gaps in a finger.
     let (mut a, mut tmp) = (vec![false; n], vec![false; n]);
-    morph(&mask, &mut a, &mut tmp, w, h, false);
-    morph(&a, &mut mask, &mut tmp, w, h, true);
-    morph(&mask, &mut a, &mut tmp, w, h, true);
-    morph(&a, &mut mask, &mut tmp, w, h, false);
+    morph(mask, &mut a, &mut tmp, w, h, false);
+    morph(&a, mask, &mut tmp, w, h, true);
+    morph(mask, &mut a, &mut tmp, w, h, true);
+    morph(&a, mask, &mut tmp, w, h, false);
 
     // 8-connected regions by flood fill.
     let max_area = (config.max_area_fraction * n as f64) as usize;
@@ -243,12 +309,7 @@ pub fn locate_moving(open: &ImageView<'_>, closed: &ImageView<'_>, config: &Loca
         let (centroid_px, axis_rad, length_px, width_px) = m.shape();
         blobs.push(Blob { area_px, bbox, centroid_px, axis_rad, length_px, width_px });
     }
-    if blobs.is_empty() {
-        return Err(LocateError::NoMotion { threshold });
-    }
-    blobs.sort_by_key(|b| std::cmp::Reverse(b.area_px));
-    let (centre_px, axis_rad, length_px, width_px) = all.shape();
-    Ok(ImageMotion { blobs, placement: Placement { centre_px, axis_rad, length_px, width_px }, threshold, noise_sigma, dropped })
+    (blobs, all, dropped)
 }
 
 #[cfg(test)]
@@ -358,6 +419,34 @@ mod tests {
             assert!((m.noise_sigma - 2.83).abs() < 1.5, "{}", m.noise_sigma);
             assert!(m.threshold >= 12 && m.threshold <= 25, "{}", m.threshold);
         }
+    }
+
+    #[test]
+    fn dark_fingers_over_a_dark_table_are_found_from_their_faint_change() {
+        // Fingers 8 grey levels above a flat dark table (40), σ 1.5 noise a frame: under the
+        // plain difference's 12-level floor, found in the 3 x 3 average at its own noise.
+        let mut rng = SplitMix64::new(11);
+        let mut bg = ImageBuf::new(W, H);
+        bg.data.iter_mut().for_each(|v| *v = 40);
+        let at = |r: f64| [[320.0 - r, 215.0], [320.0 + r, 215.0]];
+        let finger = |img: &ImageBuf| {
+            let mut out = img.clone();
+            out.data.iter_mut().for_each(|v| *v = if *v == 230 { 48 } else { 40 });
+            out
+        };
+        let (open, on_open) = draw_fingers(&bg, &at(35.0), 0.0);
+        let (closed, on_closed) = draw_fingers(&bg, &at(15.0), 0.0);
+        let truth: Vec<bool> = on_open.iter().zip(&on_closed).map(|(a, b)| a != b).collect();
+        let (open, closed) = (add_noise(&finger(&open), 1.5, &mut rng), add_noise(&finger(&closed), 1.5, &mut rng));
+        let m = locate_moving(&open.view(), &closed.view(), &LocateConfig::default()).expect("faint fingers found");
+        assert_eq!(m.blobs.len(), 4, "{:?}", m.blobs);
+        assert!(m.threshold < 8, "found below the change itself: {}", m.threshold);
+        let (centre, ..) = truth_shape(&truth);
+        assert!((m.placement.centre_px[0] - centre[0]).abs() < 1.0 && (m.placement.centre_px[1] - centre[1]).abs() < 1.0, "{:?} vs {centre:?}", m.placement);
+        // The same noise with nothing moving: still no motion.
+        let still = add_noise(&bg, 1.5, &mut rng);
+        let still2 = add_noise(&bg, 1.5, &mut rng);
+        assert!(matches!(locate_moving(&still.view(), &still2.view(), &LocateConfig::default()), Err(LocateError::NoMotion { .. })));
     }
 
     #[test]

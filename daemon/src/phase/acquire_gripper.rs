@@ -38,7 +38,8 @@ enum Stage {
     Close { sent_ns: Option<u64>, still: u32 },
     /// Location running on the worker (once submitted); the jaws reopen meanwhile.
     Locating { job: Option<PendingJob<Result<PlateCorners, LocatePlatesError>>> },
-    Converging { frames: u32 },
+    /// `found_px2`: the plate's image area as the locator found it in each view.
+    Converging { frames: u32, found_px2: [f64; 2] },
 }
 
 /// The stage as the time-out's failure names it (the wording of the stage's fields stays
@@ -59,7 +60,7 @@ impl fmt::Debug for Stage {
                 let result = job.as_ref().and_then(PendingJob::collected).map(|r| Plate(r.as_ref().map_err(ToString::to_string)));
                 f.debug_struct("Locating").field("submitted", &job.as_ref().map(PendingJob::submitted_frame)).field("result", &result).finish()
             }
-            Self::Converging { frames } => f.debug_struct("Converging").field("frames", frames).finish(),
+            Self::Converging { frames, .. } => f.debug_struct("Converging").field("frames", frames).finish(),
         }
     }
 }
@@ -134,6 +135,7 @@ impl AcquireGripper {
                 match job.poll(&mut m.worker, c.frame_index) {
                     None => Step::Stay(Cmd::HOLD),
                     Some(Ok(plates)) => {
+                        let found_px2 = plates.map(|corners| geom::area(&corners));
                         for (view, corners) in [View::Left, View::Right].into_iter().zip(plates) {
                             match ContourTracker::new(m.cfg.plate_tracker_config(), &corners) {
                                 Ok(t) => {
@@ -142,14 +144,14 @@ impl AcquireGripper {
                                 Err(e) => return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate tracker: {e}")),
                             }
                         }
-                        self.stage = Stage::Converging { frames: 0 };
+                        self.stage = Stage::Converging { frames: 0, found_px2 };
                         m.reporting.set_status("acquire gripper: plate trackers converging");
                         Step::Stay(Cmd::HOLD)
                     }
                     Some(Err(e)) => Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: {e}")),
                 }
             }
-            Stage::Converging { frames } => {
+            Stage::Converging { frames, found_px2 } => {
                 if !c.states.pair_tracking(Role::Gripper) {
                     return Step::fail(FailureKind::TrackerLost, "acquire_gripper: a plate tracker was lost while converging");
                 }
@@ -178,8 +180,12 @@ impl AcquireGripper {
                     }
                     let corners: Vec<_> = t.corners().collect();
                     areas[i] = geom::area(&corners.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>());
-                    if areas[i] < m.cfg.acquire.min_plate_area_px2 {
-                        return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate ({view:?}) only {:.0} px²", areas[i]));
+                    let least = crate::gripper::least_plate_area_px2(found_px2[i], m.cfg.acquire.min_plate_area_px2);
+                    if areas[i] < least {
+                        return Step::fail(FailureKind::GripperNotFound, format!(
+                            "acquire_gripper: plate ({view:?}) only {:.0} px², less than {least:.0} px² (half the {:.0} px² the locator found)",
+                            areas[i], found_px2[i]
+                        ));
                     }
                 }
                 let ratio = areas[0].max(areas[1]) / areas[0].min(areas[1]);

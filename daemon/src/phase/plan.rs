@@ -201,6 +201,7 @@ impl PlanPhase {
                         max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.scene.arm_clearance_m,
                         max_distance_m: p.grasp.max_site_distance_m,
                         join_m: p.scene.join_m,
+                        table_z_m: m.cfg.grasp.table_z_m,
                         front_faces_to_table_z_m: p.scene.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
                         rear_edges_from_image: p.scene.rear_edges_from_image,
                     },
@@ -232,6 +233,7 @@ impl PlanPhase {
                 let summary = out.summary.clone();
                 let target = out.target.clone();
                 let refusal = out.refusal.clone();
+                let unjudged = out.unjudged.clone();
                 m.targeting.set_alternatives(out.alternatives.iter().map(target_spec).collect());
                 m.planning.record(summary.clone(), stats);
                 m.reporting.plan(out);
@@ -247,6 +249,11 @@ impl PlanPhase {
                             .map(|d| format!(" (the nearest site, on another block, is {d:.0} mm from the indicated point)"))
                             .unwrap_or_default();
                         return Step::fail(FailureKind::Refused, format!("plan: refused: the pointed block has no graspable facet pair: {why}{elsewhere}"));
+                    }
+                    if let Some(seen) = unjudged {
+                        return Step::fail(FailureKind::NoGraspSite, format!(
+                            "plan: no grasp site: no face of the pointed block was seen that the grasp rules can judge ({seen}); not a refusal"
+                        ));
                     }
                     if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
                         return Step::fail(FailureKind::NoGraspSite, format!(

@@ -26,14 +26,14 @@ use std::time::Instant;
 
 use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
+use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, refusal_grounded, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
-pub use pixels::{edge_support, mask_and_fill};
+pub use pixels::{bottom_edge_offset, edge_support, mask_and_fill};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -48,6 +48,11 @@ pub const MIN_SOLID_WIDTH_M: f64 = 0.005;
 
 /// `PlannedScene::edge_matches` entry of a rear edge found in the images (no planner match).
 pub const IMAGE_REAR_EDGE: usize = usize::MAX;
+
+/// How far below the table a reconstructed corner may lie before its facet is taken for a
+/// false match, m: the plan's heights are good to a few millimetres with the pinhole
+/// cameras (seed 106's top face at 30-32 mm on a 30 mm cube).
+const BELOW_TABLE_M: f64 = 0.015;
 
 /// Everything the worker needs for one plan.
 pub struct PlanRequest {
@@ -85,6 +90,9 @@ pub struct SceneLimits {
     pub max_height_m: f64,
     /// Features closer than this in 3-D are one object, m.
     pub join_m: f64,
+    /// The table's height, robot frame, m: the pinhole cameras' epipolar geometry is fitted
+    /// for the heights of objects on it (`EpipolarGeometry::correct_from_cameras`).
+    pub table_z_m: f64,
     /// Hypothesise the vertical faces below top faces' front edges that the planner missed,
     /// down to the table at this height (robot frame, m); `None`: do not.
     pub front_faces_to_table_z_m: Option<f64>,
@@ -253,8 +261,13 @@ pub struct PlanOutput {
     pub images: [ImageBuf; 2],
     /// With no target: why the pointed block (the facets reconstructed near the indicated
     /// point) has no grasp the rules allow, in words, from this plan's own facets and
-    /// rejections; `None` when nothing was reconstructed near the point.
+    /// rejections; `None` when nothing was reconstructed near the point, or when what was
+    /// reconstructed fails only rules that say what the cameras saw (see `unjudged`).
     pub refusal: Option<String>,
+    /// With no target and no refusal: the pointed block was seen, but no face of it that the
+    /// grasp rules can judge (only its top, or only faces turned past the view-angle rule),
+    /// in words. Not a refusal: the judge on true geometry may well find a grasp.
+    pub unjudged: Option<String>,
 }
 
 /// A short name for a rejection reason.
@@ -437,6 +450,11 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let mut geo = EpipolarGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
+        // Match along the cameras' own epipolar lines, not only the cage's linear constraint
+        // (blocks near the image edges, below the cage, are off it by more than the tolerance).
+        let z = req.scene.table_z_m;
+        let rms = geo.correct_from_cameras(req.images[0].width, req.images[0].height, &[z, z + 0.03, z + 0.06]);
+        tracing::debug!(?rms, "epipolar correction from the pinhole cameras");
     }
     summary.geometry.projective_residual_px = geo.projective.as_ref().map(|p| p.residual_rms_px);
     let t0 = Instant::now();
@@ -447,6 +465,19 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.counts.planes = plan.planes.len();
     summary.geometry.bootstrap_rms_px = plan.bootstrap.map(|b| [b.rms_before_px, b.rms_after_px]);
     let mut ps = scene_from_plan(&plan, toward, req.scene.max_height_m, req.scene.join_m);
+    // A facet reaching well below the table is a false match, not a block (the corners of a
+    // face matched to the wrong edges in the other view): its "steep top edge" would refuse
+    // a block for a slope it does not have.
+    let mut k = 0;
+    while k < ps.facets.len() {
+        if ps.scene.facets[k].polygon_m.iter().any(|p| p.z < req.scene.table_z_m - BELOW_TABLE_M) {
+            ps.facets.remove(k);
+            ps.scene.facets.remove(k);
+            *summary.sites.rejected_by_reason.entry("below_table".into()).or_insert(0) += 1;
+        } else {
+            k += 1;
+        }
+    }
     let planned_facets = ps.facets.len();
     if let Some(table_z) = req.scene.front_faces_to_table_z_m {
         let project = |p: &Vector3<f64>| {
@@ -455,16 +486,25 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             ok.then(|| px.map(|q| [q[0] + PLANNER_FROM_TRACKER_PX, q[1] + PLANNER_FROM_TRACKER_PX]))
         };
         hypothesise_front_faces(&mut ps, &project, table_z, 0.01, 20f64.to_radians(), req.grasp.max_view_angle_rad, 1.5 * req.scene.join_m);
-        // A hypothesised face must show its bottom edge, against the table, in both views:
-        // one hung from a top edge where the block does not go straight down (the tall leg
-        // of an L over its low leg) has none there.
+        // A hypothesised face must show its bottom edge, against the table, in both views,
+        // near where the model projects it (the model is extrapolated below the cage and
+        // may be a few pixels off there): one hung from a top edge where the block does not
+        // go straight down (the tall leg of an L over its low leg) has none there. Its image
+        // outline's bottom corners go where the edge is, for the target trackers.
         let mut k = planned_facets;
         while k < ps.facets.len() {
             let src = &ps.facets[k];
-            let seen = [(&req.images[0], &src.left_px), (&req.images[1], &src.right_px)]
+            let offsets: Option<Vec<[f64; 2]>> = [(&req.images[0], &src.left_px), (&req.images[1], &src.right_px)]
                 .iter()
-                .all(|(img, poly)| edge_support(img, to_tracker_px(poly[0]), to_tracker_px(poly[1])) >= 0.6);
-            if seen {
+                .map(|(img, poly)| bottom_edge_offset(img, &poly.iter().copied().map(to_tracker_px).collect::<Vec<_>>(), 0.6))
+                .collect();
+            if let Some(offsets) = offsets {
+                let src = &mut ps.facets[k];
+                for (poly, off) in [&mut src.left_px, &mut src.right_px].into_iter().zip(offsets) {
+                    for corner in poly.iter_mut().take(2) {
+                        *corner = [corner[0] + off[0], corner[1] + off[1]];
+                    }
+                }
                 k += 1;
             } else {
                 ps.facets.remove(k);
@@ -526,7 +566,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         Err(e) => {
             summary.sites.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
             summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None };
+            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None, unjudged: None };
         }
     };
     // No site near the point, or only zero-width ones (the thesis's thin wall; among
@@ -616,16 +656,34 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     };
     let target = chosen.as_ref().map(planned);
     let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
-    let refusal = if target.is_none() { pointed_block_refusal(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
+    let verdict = if target.is_none() { pointed_block_verdict(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
+    let (refusal, unjudged) = match verdict {
+        Some(PointedBlock::Refused(why)) => (Some(why), None),
+        Some(PointedBlock::Unjudged(why)) => (None, Some(why)),
+        None => (None, None),
+    };
     summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-    PlanOutput { summary, target, alternatives, images: req.images, refusal }
+    PlanOutput { summary, target, alternatives, images: req.images, refusal, unjudged }
+}
+
+/// What the plan says of the pointed block when it has no grasp.
+#[derive(Debug, Clone, PartialEq)]
+enum PointedBlock {
+    /// It fails rules the judge on true geometry also applies: a refusal, with why.
+    Refused(String),
+    /// Only what was seen of it fails (no vertical face, no top edge, faces turned from the
+    /// cameras): what was seen, in words.
+    Unjudged(String),
 }
 
 /// Why the pointed block has no grasp, in words ([`why_no_grasp`]): the block is the
 /// connected component of the facet whose centre lies nearest the indicated point in plan
 /// view, within `max_distance_m` (without a point, every facet). `None` when no facet is
-/// that near: nothing was seen there, which is not a refusal but a failure to see.
-fn pointed_block_refusal(ps: &PlannedScene, rejected: &[Rejection], indicated: Option<&Vector3<f64>>, config: &GraspConfig, max_distance_m: f64) -> Option<String> {
+/// that near: nothing was seen there, which is not a refusal but a failure to see. A
+/// refusal only when a facet of the block fails a rule the judge also applies
+/// ([`refusal_grounded`]); a block seen only from the top, or only by faces the view-angle
+/// rule leaves out, is [`PointedBlock::Unjudged`].
+fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: Option<&Vector3<f64>>, config: &GraspConfig, max_distance_m: f64) -> Option<PointedBlock> {
     let facets = &ps.scene.facets;
     let component = match indicated {
         Some(p) => {
@@ -640,7 +698,8 @@ fn pointed_block_refusal(ps: &PlannedScene, rejected: &[Rejection], indicated: O
         None => None,
     };
     let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
-    Some(why_no_grasp(rejected, name, config))
+    let why = why_no_grasp(rejected, name, config);
+    Some(if refusal_grounded(rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
 }
 
 #[cfg(test)]

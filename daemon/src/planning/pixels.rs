@@ -148,6 +148,102 @@ pub fn edge_support(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
     hits as f64 / (steps + 1) as f64
 }
 
+/// How strongly the image steps across the segment `a`-`b` exactly on it (tracker pixels):
+/// the mean absolute difference of the pixels 2 px either side along its normal, grey levels.
+/// Unlike [`edge_support`] it has no slack across the segment, so it peaks where the edge is.
+pub fn edge_strength(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len = dx.hypot(dy);
+    if len.is_nan() || len < 4.0 {
+        return 0.0;
+    }
+    let (nx, ny) = (-dy / len, dx / len);
+    let at = |x: f64, y: f64| -> Option<f64> {
+        let (xi, yi) = (x.round(), y.round());
+        (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width && (yi as usize) < img.height).then(|| f64::from(img.get(xi as usize, yi as usize)))
+    };
+    let steps = len.floor() as usize;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for i in 0..=steps {
+        let t = i as f64 / steps as f64;
+        let (x, y) = (a[0] + t * dx, a[1] + t * dy);
+        if let (Some(p), Some(q)) = (at(x + 2.0 * nx, y + 2.0 * ny), at(x - 2.0 * nx, y - 2.0 * ny)) {
+            sum += (p - q).abs();
+            n += 1;
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// The segment `a`-`b` moved along `dir` (a unit image direction) by the shift, within
+/// `max_shift_px` either way in 1 px steps, at which the image steps most strongly across it
+/// ([`edge_strength`]): the middle of the run of shifts within 5 % of the strongest (a sharp
+/// step is as strong over the few pixels the 2 px sampling straddles), the run nearest no
+/// shift. For an edge whose image place comes from a model that may be a few pixels off (the
+/// bottom edge of a face hung from a top edge down to the table): where the edge is.
+pub fn strongest_shift(img: &ImageBuf, a: [f64; 2], b: [f64; 2], dir: [f64; 2], max_shift_px: f64) -> f64 {
+    let reach = max_shift_px.max(0.0).floor() as i32;
+    let strength: Vec<f64> = (-reach..=reach)
+        .map(|k| {
+            let s = f64::from(k);
+            let m = |p: [f64; 2]| [p[0] + s * dir[0], p[1] + s * dir[1]];
+            edge_strength(img, m(a), m(b))
+        })
+        .collect();
+    let max = strength.iter().copied().fold(0.0, f64::max);
+    if max <= 0.0 {
+        return 0.0;
+    }
+    let strong = |i: usize| strength[i] >= 0.95 * max;
+    let centre = reach as usize;
+    let Some(seed) = (0..strength.len()).filter(|&i| strong(i)).min_by_key(|&i| i.abs_diff(centre)) else { return 0.0 };
+    let (mut lo, mut hi) = (seed, seed);
+    while lo > 0 && strong(lo - 1) {
+        lo -= 1;
+    }
+    while hi + 1 < strength.len() && strong(hi + 1) {
+        hi += 1;
+    }
+    (lo + hi) as f64 / 2.0 - f64::from(reach)
+}
+
+/// Where the bottom edge of a face hung from a top edge down to the table shows in one view:
+/// `quad` is its outline (tracker pixels) bottom corners first, `[a0, b0, b, a]`, its bottom
+/// placed by a model that may be a few pixels off at table height (the cage of reference
+/// points is 10-15 cm above it). The bottom edge is looked for within 30 % of the face's
+/// image height of where the model put it ([`strongest_shift`]) and must have image support
+/// there ([`edge_support`] at least `min_support`), and the face between it and the top edge
+/// must be one face: no edge along it inside, more than 6 px from both (the tall leg of an
+/// L-block over its low leg shows the step there). Returns the image offset to add to the
+/// bottom corners; `None` when the face is not seen.
+pub fn bottom_edge_offset(img: &ImageBuf, quad: &[[f64; 2]], min_support: f64) -> Option<[f64; 2]> {
+    let [a0, b0, b, a] = <[[f64; 2]; 4]>::try_from(quad).ok()?;
+    let (ua, ub) = ([a[0] - a0[0], a[1] - a0[1]], [b[0] - b0[0], b[1] - b0[1]]);
+    let height_px = 0.5 * (ua[0].hypot(ua[1]) + ub[0].hypot(ub[1]));
+    let up = [ua[0] + ub[0], ua[1] + ub[1]];
+    let norm = up[0].hypot(up[1]);
+    if !(height_px.is_finite() && norm > 1e-9) {
+        return None;
+    }
+    let up = [up[0] / norm, up[1] / norm];
+    let s = strongest_shift(img, a0, b0, up, 0.3 * height_px);
+    let moved = |p: [f64; 2], d: f64| [p[0] + d * up[0], p[1] + d * up[1]];
+    if edge_support(img, moved(a0, s), moved(b0, s)) < min_support {
+        return None;
+    }
+    const MARGIN_PX: f64 = 6.0;
+    let mut d = s + MARGIN_PX;
+    while d <= height_px - MARGIN_PX {
+        let t = d / height_px;
+        let on_face = |lo: [f64; 2], hi: [f64; 2]| [lo[0] + t * (hi[0] - lo[0]), lo[1] + t * (hi[1] - lo[1])];
+        if edge_support(img, on_face(a0, a), on_face(b0, b)) >= min_support {
+            return None;
+        }
+        d += 1.0;
+    }
+    Some([s * up[0], s * up[1]])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,5 +291,49 @@ mod tests {
         assert!(edge_support(&img, [5.0, 20.0], [55.0, 20.0]) < 0.05, "along the edge's normal");
         assert_eq!(edge_support(&img, [10.0, 5.0], [10.0, 6.0]), 0.0, "too short");
         assert_eq!(edge_support(&img, [-100.0, 5.0], [-100.0, 35.0]), 0.0, "off the image");
+    }
+
+    #[test]
+    fn the_strongest_shift_finds_an_edge_a_model_put_a_few_pixels_off() {
+        // A face (120) above a table (30) with the step at y = 27.5: the model's line at
+        // y = 20 is found 7-8 px down; a flat image gives no shift.
+        let mut img = ImageBuf::new(60, 50);
+        for y in 0..50 {
+            for x in 0..60 {
+                img.set(x, y, if y < 28 { 120 } else { 30 });
+            }
+        }
+        let s = strongest_shift(&img, [10.0, 20.0], [50.0, 20.0], [0.0, 1.0], 10.0);
+        assert!((7.0..=8.0).contains(&s), "{s}");
+        assert!(edge_strength(&img, [10.0, 20.0 + s], [50.0, 20.0 + s]) > 80.0);
+        assert!(edge_strength(&img, [10.0, 10.0], [50.0, 10.0]) < 1.0, "inside the face");
+        let flat = ImageBuf::new(60, 50);
+        assert_eq!(strongest_shift(&flat, [10.0, 20.0], [50.0, 20.0], [0.0, 1.0], 10.0), 0.0);
+    }
+
+    #[test]
+    fn a_hung_face_is_seen_down_to_its_bottom_edge_and_not_over_a_step() {
+        // A face from y = 10 (top) to y = 37.5 (its bottom, against a dark table), 20..50 px
+        // wide; the model put its bottom at y = 33.
+        let mut img = ImageBuf::new(70, 60);
+        for y in 0..60 {
+            for x in 0..70 {
+                img.set(x, y, if (20..50).contains(&x) && (10..38).contains(&y) { 120 } else { 30 });
+            }
+        }
+        let quad = [[20.0, 33.0], [50.0, 33.0], [50.0, 10.0], [20.0, 10.0]];
+        let off = bottom_edge_offset(&img, &quad, 0.6).expect("seen");
+        assert!(off[0].abs() < 1e-9 && (4.0..=5.0).contains(&off[1]), "{off:?}");
+        // A step across the face halfway down (an L-block's tall leg over its low leg): not
+        // one face.
+        for y in 22..38 {
+            for x in 20..50 {
+                img.set(x, y, 190);
+            }
+        }
+        assert_eq!(bottom_edge_offset(&img, &quad, 0.6), None);
+        // No bottom edge near where the model put it: not seen.
+        let flat = ImageBuf::new(70, 60);
+        assert_eq!(bottom_edge_offset(&flat, &quad, 0.6), None);
     }
 }

@@ -33,6 +33,16 @@ fn magnitude(r: &RejectReason) -> f64 {
     }
 }
 
+/// Whether the rejections of the facets that `facet_name` names ground a refusal: some facet
+/// got past the stages that say only what the cameras saw (no vertical face, no top edge, a
+/// face turned from the cameras, the thin-wall pairing of a top edge with itself) and failed
+/// a rule the judge on true geometry also applies (a steep top edge, no parallel edge
+/// behind within reach, too wide, a collision). A block seen only from its top, or only by
+/// faces the daemon's view-angle rule leaves out, has not been judged, so it is no refusal.
+pub fn refusal_grounded(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>) -> bool {
+    rejected.iter().any(|r| facet_name(r.facet).is_some() && progress(r) >= 2)
+}
+
 /// Why no grasp was found on the facets that `facet_name` names (`None`: a facet of another
 /// block, left out): per facet the furthest rule it failed (the nearest miss among equals),
 /// each phrase said once, steep top edges first as "its top edges slope N°" (the least
@@ -114,5 +124,25 @@ mod tests {
         );
         assert_eq!(why_no_grasp(&rejected[3..4], |_| Some("x".into()), &c), "behind its x the nearest parallel edge is 27 mm lower, past the fingers' 25 mm");
         assert_eq!(why_no_grasp(&rejected[4..5], |_| Some("x".into()), &c), "none of its faces is within 20° of vertical");
+    }
+
+    #[test]
+    fn only_rules_the_judge_applies_ground_a_refusal() {
+        let all = |_: usize| Some("x".to_string());
+        // Seen only from the top, or by a face turned past the daemon's view-angle rule, or
+        // with no top edge: not judged.
+        let unseen = [
+            rejection(0, RejectReason::FacetNotVertical { tilt_rad: 1.5 }),
+            rejection(1, RejectReason::TurnedFromViewer { angle_rad: 1.1 }),
+            rejection(2, RejectReason::NoTopEdge),
+        ];
+        assert!(!refusal_grounded(&unseen, all));
+        // A steep top edge, or a rear edge out of reach, is the block's own geometry.
+        let mut judged = unseen.to_vec();
+        judged.push(rejection(3, RejectReason::TopEdgeTooSteep { slope_rad: 0.7 }));
+        assert!(refusal_grounded(&judged, all));
+        assert!(refusal_grounded(&[rejection(0, RejectReason::RearOutOfReach { drop_m: 0.03 })], all));
+        // ... but not on a facet of another block.
+        assert!(!refusal_grounded(&judged, |f| (f != 3).then(|| "x".to_string())));
     }
 }

@@ -15,7 +15,8 @@
 //!    40 x 100 mm body rectangle against every feature above the *high-water mark* (25 mm
 //!    above the site).
 //! 5. The highest collision-free site of each facet is kept; the one nearest the indicated
-//!    point (in plan view) is chosen.
+//!    point (in plan view) is chosen (of sites within 5 mm as near, the one on the face
+//!    that looks most towards the cameras).
 //!
 //! Optionally (`max_view_angle_rad`) facets turned too far from the viewer in plan view are
 //! left out: a gripper whose tracked face is normal to the jaws' closing axis ends up as
@@ -48,7 +49,7 @@ pub mod scene;
 #[cfg(test)]
 mod tests;
 
-pub use explain::why_no_grasp;
+pub use explain::{refusal_grounded, why_no_grasp};
 pub use scene::{hypothesise_front_faces, scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};
@@ -497,6 +498,10 @@ fn first_collision(scene: &GraspScene, frame: &PlanFrame, rects: &[Rect], z_min:
 /// Sites of one facet closer in height than this count as equally high, metres.
 const EQUAL_HEIGHT_M: f64 = 0.002;
 
+/// Sites whose distances from the indicated point differ by less than this are equally near
+/// it (plan view, m): the reconstruction's error of a block's centre.
+const EQUAL_DISTANCE_M: f64 = 0.005;
+
 /// Plans grasps on `scene`; `indicated_m` (robot frame) picks among the candidates.
 ///
 /// ```
@@ -666,6 +671,19 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
         Some(p) => {
             let plan_distance = |g: &Grasp| (g.site.centre_m.xy() - p.xy()).norm();
             candidates.sort_by(|a, b| plan_distance(a).total_cmp(&plan_distance(b)));
+            // Of sites as near the point as the nearest (two faces of one block: an across-
+            // the-block grasp is centred on the block whichever face it is servoed on), the
+            // one on the face that looks most towards the cameras: a face seen edge-on is a
+            // few pixels wide, and its trackers cannot hold it.
+            let toward = Vector3::new(scene.toward_viewer[0], scene.toward_viewer[1], 0.0).try_normalize(1e-12);
+            if let (Some(first), Some(toward)) = (candidates.first(), toward) {
+                let reach = plan_distance(first) + EQUAL_DISTANCE_M;
+                let facing = |g: &Grasp| polygon_normal(&scene.facets[g.site.facet].polygon_m).map_or(0.0, |n| Vector3::new(n[0], n[1], 0.0).normalize().dot(&toward).abs());
+                let best = (0..candidates.len()).take_while(|&i| plan_distance(&candidates[i]) <= reach).reduce(|b, i| if facing(&candidates[i]) > facing(&candidates[b]) + 1e-9 { i } else { b });
+                if let Some(best) = best {
+                    candidates[..=best].rotate_right(1);
+                }
+            }
         }
         None => candidates.sort_by(|a, b| b.site.front_m[2].total_cmp(&a.site.front_m[2])),
     }

@@ -407,3 +407,21 @@ fn the_width_limit_is_the_gripper_models() {
     assert!((g.site.width_m - 0.06).abs() < 1e-12);
     assert!((g.opening_m - 0.08).abs() < 1e-12, "width plus both fingers' clearance");
 }
+
+#[test]
+fn of_two_faces_as_near_the_point_the_one_facing_the_cameras_is_chosen() {
+    // A 25 x 42 x 30 mm bar: its +y end face listed first, its long +x face (towards the
+    // cameras at +x) second, and its top. Both grasps are centred on the bar, as near the
+    // point as each other; the end face is seen nearly edge-on.
+    let (x1, y1, h) = (0.025, 0.042, 0.03);
+    let side = facet(vec![p(0.0, y1, 0.0), p(x1, y1, 0.0), p(x1, y1, h), p(0.0, y1, h)], 0);
+    let front = facet(vec![p(x1, 0.0, 0.0), p(x1, y1, 0.0), p(x1, y1, h), p(x1, 0.0, h)], 0);
+    let top = facet(vec![p(0.0, 0.0, h), p(x1, 0.0, h), p(x1, y1, h), p(0.0, y1, h)], 0);
+    let s = scene(vec![side, front, top], vec![]);
+    let plan = plan_grasps(&s, Some(&p(0.0125, 0.021, 0.0)), &GraspConfig::default()).unwrap();
+    let sites: Vec<usize> = plan.candidates.iter().map(|g| g.site.facet).collect();
+    assert!(sites.contains(&0) && sites.contains(&1), "both faces graspable: {sites:?}");
+    let g = plan.chosen.unwrap();
+    assert_eq!(g.site.facet, 1, "the face towards the cameras");
+    assert!((g.site.width_m - x1).abs() < 1e-9);
+}

@@ -29,7 +29,7 @@
 //! assert!((stereo.reconstruct(&[a[0], a[1], b[0], b[1]]) - x).norm() < 1e-6);
 //! ```
 
-use nalgebra::{DMatrix, Matrix3, Matrix3x4, Matrix4, Matrix4x3, Vector3, Vector4};
+use nalgebra::{DMatrix, Matrix2, Matrix3, Matrix3x4, Matrix4, Matrix4x3, Vector2, Vector3, Vector4};
 
 use crate::affine::FitError;
 
@@ -78,6 +78,21 @@ impl ProjectiveStereo {
     pub fn project(&self, x_m: &Vector3<f64>) -> [f64; 4] {
         let (a, b) = (project(&self.left, x_m), project(&self.right, x_m));
         [a[0], a[1], b[0], b[1]]
+    }
+
+    /// The robot point at height `z_m` that the left camera sees at `(u, v)`, with its depth
+    /// in each camera (the projections' third coordinates: their sign says which side of the
+    /// camera it is on, in the fit's own sign). `None` when the ray runs along the plane.
+    pub fn left_ray_at_height(&self, u: f64, v: f64, z_m: f64) -> Option<(Vector3<f64>, [f64; 2])> {
+        let p = &self.left;
+        let r0 = p.row(0) - p.row(2) * u;
+        let r1 = p.row(1) - p.row(2) * v;
+        let a = Matrix2::new(r0[0], r0[1], r1[0], r1[1]);
+        let b = Vector2::new(-(r0[2] * z_m + r0[3]), -(r1[2] * z_m + r1[3]));
+        let xy = a.try_inverse()? * b;
+        let x = Vector3::new(xy.x, xy.y, z_m);
+        let depth = |p: &Matrix3x4<f64>| (p.row(2) * x.push(1.0))[0];
+        Some((x, [depth(&self.left), depth(&self.right)]))
     }
 
     /// The robot point seen at `w = (u, v, u', v')`: linear triangulation, re-weighted once by
