@@ -179,6 +179,62 @@ struct GridSummary {
     left_lost: usize,
     /// Worst annotated error of each run that was not lost.
     worsts: Vec<f64>,
+    /// Runs that end in or pass through a wrong lock: the top face >= 6 px off the annotated
+    /// corners on some annotated frame while its tracker still reported `tracking` (issue 18
+    /// item 5's count; a run that strays and is lost later counts here too).
+    top_wrong_lock: usize,
+    /// Top face lost without having passed through a wrong lock first.
+    top_lost_clean: usize,
+    /// One line per run: its start and both faces' verdicts (see [`RunVerdict`]).
+    verdicts: Vec<String>,
+}
+
+/// What happened to one face in one run, for comparing two builds run by run.
+enum RunVerdict {
+    /// Tracked to the last frame; the worst annotated error (top face only, else 0).
+    Tracked { worst_px: f64 },
+    /// Reported lost at this frame, with its reason code; the worst annotated error before.
+    Lost { frame: usize, reason: &'static str, worst_px: f64 },
+}
+
+impl RunVerdict {
+    fn worst_px(&self) -> f64 {
+        match self {
+            RunVerdict::Tracked { worst_px } | RunVerdict::Lost { worst_px, .. } => *worst_px,
+        }
+    }
+
+    /// E.g. `tracked 2.31` or `lost@123:wrong_lock 2.10`; `WRONG` marks a wrong lock.
+    fn text(&self) -> String {
+        let wrong = if self.worst_px() >= 6.0 { " WRONG" } else { "" };
+        match self {
+            RunVerdict::Tracked { worst_px } => format!("tracked {worst_px:.2}{wrong}"),
+            RunVerdict::Lost { frame, reason, worst_px } => format!("lost@{frame}:{reason} {worst_px:.2}{wrong}"),
+        }
+    }
+}
+
+/// Tracks one face through every frame from `start`: lost or tracked, and the worst error on
+/// the annotated frames after 0 while it reported `tracking` (when `truth` is given).
+fn track_run(frames: &[ImageBuf], config: TrackerConfig, start: &[[f64; 2]], truth: bool) -> RunVerdict {
+    let dt_s = 1.0 / 30.0;
+    let mut tracker = ContourTracker::new(config, start).unwrap();
+    let mut worst_px: f64 = 0.0;
+    for (k, frame) in frames.iter().enumerate() {
+        let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s });
+        if let Some(reason) = state.lost_reason() {
+            return RunVerdict::Lost { frame: k, reason: reason.code(), worst_px };
+        }
+        if !truth {
+            continue;
+        }
+        if let Some((_, annotated)) = TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
+            for (c, t) in tracker.corners().zip(annotated) {
+                worst_px = worst_px.max((c - Vector2::new(t[0], t[1])).norm());
+            }
+        }
+    }
+    RunVerdict::Tracked { worst_px }
 }
 
 impl GridSummary {
@@ -187,11 +243,13 @@ impl GridSummary {
         worsts.sort_by(f64::total_cmp);
         let mean = worsts.iter().sum::<f64>() / worsts.len().max(1) as f64;
         format!(
-            "grid {} runs: top fails {} (lost {}, >= 6 px {}), top worst error mean {mean:.2} median {:.2} max {:.2}; left lost {}; failed: {}",
+            "grid {} runs: top fails {} (lost {}, >= 6 px {}), wrong locks (>= 6 px while tracking, ending lost or not) {}, lost without one {}, top worst error mean {mean:.2} median {:.2} max {:.2}; left lost {}; failed: {}",
             self.runs,
             self.top_fail.len(),
             self.top_lost,
             self.top_wrong,
+            self.top_wrong_lock,
+            self.top_lost_clean,
             worsts.get(worsts.len() / 2).copied().unwrap_or(0.0),
             worsts.last().copied().unwrap_or(0.0),
             self.left_lost,
@@ -211,19 +269,26 @@ fn wide_grid(frames: &[ImageBuf], config: TrackerConfig) {
             total.runs += summary.runs;
             total.top_lost += summary.top_lost;
             total.top_wrong += summary.top_wrong;
+            total.top_wrong_lock += summary.top_wrong_lock;
+            total.top_lost_clean += summary.top_lost_clean;
+            total.verdicts.extend(summary.verdicts.iter().map(|v| format!("{points}/{corner_margin}/{v}")));
             total.left_lost += summary.left_lost;
             total.worsts.extend(summary.worsts);
             total.top_fail.extend(summary.top_fail.iter().map(|f| format!("{points}/{corner_margin}:{f}")));
         }
     }
     println!("wide {}", total.line().split("; failed").next().unwrap_or(""));
+    // TRACKER_VERDICTS=FILE: one line per run (`points/margin/dx,dy,scale top ... | left ...`),
+    // to compare two builds run by run (`diff`).
+    if let Some(path) = std::env::var_os("TRACKER_VERDICTS") {
+        std::fs::write(&path, total.verdicts.join("\n") + "\n").unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
 }
 
 /// Tracks the top and left faces from a grid of initial offsets (and a few scalings about the
 /// face's centre) and summarises how often the top face is lost or strays >= 4 px from the
 /// ground truth (frames after 0), and how often the left face is lost.
 fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
-    let dt_s = 1.0 / 30.0;
     let mut inits = Vec::new();
     for dy in -3..=3 {
         for dx in -3..=3 {
@@ -241,37 +306,27 @@ fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
     };
     let mut summary = GridSummary { runs: inits.len(), ..GridSummary::default() };
     for &(dx, dy, scale) in &inits {
-        let mut tracker = ContourTracker::new(config, &place(&TOP, dx, dy, scale)).unwrap();
-        let mut worst: f64 = 0.0;
-        let mut lost = false;
-        for (k, frame) in frames.iter().enumerate() {
-            if !tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
-                lost = true;
-                break;
+        let top = track_run(frames, config, &place(&TOP, dx, dy, scale), true);
+        let worst = top.worst_px();
+        let wrong_lock = worst >= 6.0;
+        summary.top_wrong_lock += usize::from(wrong_lock);
+        match top {
+            RunVerdict::Lost { .. } => {
+                summary.top_lost += 1;
+                summary.top_lost_clean += usize::from(!wrong_lock);
+                summary.top_fail.push(format!("{dx},{dy},{scale}(lost)"));
             }
-            if let Some((_, truth)) = TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
-                for (c, t) in tracker.corners().zip(truth) {
-                    worst = worst.max((c - Vector2::new(t[0], t[1])).norm());
+            RunVerdict::Tracked { .. } => {
+                summary.worsts.push(worst);
+                if worst >= 4.0 {
+                    summary.top_fail.push(format!("{dx},{dy},{scale}({worst:.2})"));
                 }
+                summary.top_wrong += usize::from(wrong_lock);
             }
         }
-        if lost {
-            summary.top_lost += 1;
-            summary.top_fail.push(format!("{dx},{dy},{scale}(lost)"));
-        } else {
-            summary.worsts.push(worst);
-            if worst >= 4.0 {
-                summary.top_fail.push(format!("{dx},{dy},{scale}({worst:.2})"));
-            }
-            summary.top_wrong += usize::from(worst >= 6.0);
-        }
-        let mut left = ContourTracker::new(config, &place(&LEFT, dx, dy, scale)).unwrap();
-        for (k, frame) in frames.iter().enumerate() {
-            if !left.update(&frame.view(), if k == 0 { 0.0 } else { dt_s }).is_tracking() {
-                summary.left_lost += 1;
-                break;
-            }
-        }
+        let left = track_run(frames, config, &place(&LEFT, dx, dy, scale), false);
+        summary.left_lost += usize::from(matches!(left, RunVerdict::Lost { .. }));
+        summary.verdicts.push(format!("{dx},{dy},{scale} top {} | left {}", top.text(), left.text()));
     }
     summary
 }
