@@ -105,6 +105,18 @@ pub struct TrackerConfig {
     pub min_inlier_ratio_to_recent: f64,
     /// Lost when the inliers' RMS residual exceeds this, px.
     pub max_residual_px: f64,
+    /// Wrong-lock check (`tracker::wrong_lock`): a side's rival edge, parallel to it and
+    /// more than `inlier_px` away, counts when at least this many more of the side's points
+    /// found an edge on it than on the side (with ~25 points a side, 3 is more than the
+    /// one or two points a side's count moves from update to update on a steady track).
+    pub rival_margin_points: usize,
+    /// Nearest a rival edge may lie to its side, px.
+    pub min_rival_offset_px: f64,
+    /// Lost (`wrong_lock`) after this many updates in a row with a counting rival (0: never).
+    /// On the face's true outline the wide pass pulls a side onto the edge most of its points
+    /// see within a few updates (the start from a polygon 3-5 px off snaps in 1-4); a third
+    /// of a second at 30 frames/s is past that and far short of what the servo may act on.
+    pub max_rival_updates: usize,
     /// Lost when the contour is squashed (ratio of the singular values of the deformation
     /// since initialisation) beyond this.
     pub max_squash: f64,
@@ -158,6 +170,9 @@ impl Default for TrackerConfig {
             min_edge_fraction: 0.3,
             min_inlier_fraction: 0.3,
             max_residual_px: 1.2,
+            rival_margin_points: 3,
+            min_rival_offset_px: 5.0,
+            max_rival_updates: 10,
             min_direction_support: 0.35,
             min_inlier_ratio_to_recent: 0.65,
             max_squash: 8.0,
@@ -213,6 +228,14 @@ impl TrackerConfig {
         check(unit(self.min_edge_fraction), "min_edge_fraction", self.min_edge_fraction, "0..=1")?;
         check(unit(self.min_inlier_fraction), "min_inlier_fraction", self.min_inlier_fraction, "0..=1")?;
         check(self.max_residual_px > 0.0, "max_residual_px", self.max_residual_px, "> 0 px")?;
+        check((1..=1000).contains(&self.rival_margin_points), "rival_margin_points", self.rival_margin_points as f64, "1..=1000")?;
+        check(
+            self.min_rival_offset_px >= 0.0 && self.min_rival_offset_px <= MAX_SEARCH_PX,
+            "min_rival_offset_px",
+            self.min_rival_offset_px,
+            "0..=40 px",
+        )?;
+        check(self.max_rival_updates <= 100_000, "max_rival_updates", self.max_rival_updates as f64, "0..=100000")?;
         check(unit(self.min_direction_support), "min_direction_support", self.min_direction_support, "0..=1")?;
         check(unit(self.min_inlier_ratio_to_recent), "min_inlier_ratio_to_recent", self.min_inlier_ratio_to_recent, "0..=1")?;
         check(self.max_squash >= 1.0, "max_squash", self.max_squash, ">= 1")?;

@@ -70,6 +70,7 @@ mod simd;
 mod state;
 mod stereo;
 pub mod synth;
+mod wrong_lock;
 
 pub use config::{TrackerConfigError, EdgeSign, TrackerConfig};
 pub use contour::{Template, TemplateError, MIN_POINTS};

@@ -1,0 +1,89 @@
+//! Wrong-lock evidence (issue 18 item 5): a side of the contour that slid onto a texture
+//! edge or a neighbouring face's edge while the fit still looks good. Inliers, residual and
+//! support all stay normal on such a lock (the wrong edge is a good edge); what gives it away
+//! is that the side's own points see, in the wide pass, a *rival*: another straight edge
+//! parallel to the side, a few px further out or in, on which more of them found an edge than
+//! on the side where the fit put it. A tracker on the face's true outline has no such rival
+//! for long: the wide pass pulls a side onto the edge most of its points see within a few
+//! updates. One that stays on the weaker edge while the stronger one stays in view is locked on
+//! the wrong edge.
+
+use super::contour::TemplateEdge;
+use super::search::PointEdges;
+
+/// Bins of the rival histogram: offsets of ±47 px in 1 px steps (the search reaches ±40).
+const RIVAL_BINS: usize = 95;
+
+/// The side with the strongest rival edge after a wide pass.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Rival {
+    /// Side index (corner `side` to `side + 1`).
+    pub side: usize,
+    /// Points of the side with an edge within the band of the fitted side.
+    pub support: usize,
+    /// Points of the side with an edge within the band of the rival line.
+    pub rival: usize,
+    /// The rival line's offset from the fitted side along the outward normal, px.
+    pub offset_px: f64,
+}
+
+/// Per side, a histogram of where the points' candidate edges lie relative to the fitted
+/// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
+/// axis as the candidates' `h_px`). The fitted side's support is the points with an edge
+/// within `band_px` of it; a rival's, the points with an edge within `band_px` of a parallel
+/// line at least `2 band_px` (whole px, plus one) away, so that no point counts for both.
+/// Returns the side whose best rival outnumbers its support the most. Allocates nothing.
+/// Per side, a histogram of where the points' candidate edges lie relative to the fitted
+/// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
+/// axis as the candidates' `h_px`). The side's support is the points with an edge within
+/// `band_px` of it; a rival's, the points with an edge within `band_px` of a parallel line at
+/// least `min_offset_px` (and more than `2 band_px`) away, so that no edge counts for both.
+/// Each point counts once per line. Returns the side whose best rival outnumbers its support
+/// the most. Allocates nothing.
+pub(crate) fn strongest_rival(
+    sides: &[TemplateEdge],
+    edges: &[PointEdges],
+    fitted_px: &[f64],
+    band_px: f64,
+    min_offset_px: f64,
+) -> Rival {
+    let half = (RIVAL_BINS / 2) as i64;
+    let min_offset = min_offset_px.max(2.0 * band_px + 1.0).ceil() as i64;
+    let mut best = Rival::default();
+    let mut best_excess = i64::MIN;
+    for (s, side) in sides.iter().enumerate().filter(|(_, s)| s.count > 0) {
+        let mut votes = [0u16; RIVAL_BINS];
+        // The last point that voted for each line.
+        let mut voter = [usize::MAX; RIVAL_BINS];
+        let mut support = 0usize;
+        for i in side.first..side.first + side.count {
+            let mut on_side = false;
+            for c in edges[i].as_slice() {
+                let r = f64::from(c.h_px) - fitted_px[i];
+                on_side |= r.abs() <= band_px;
+                let (lo, hi) = ((r - band_px).ceil() as i64, (r + band_px).floor() as i64);
+                for o in lo.max(-half)..=hi.min(half) {
+                    let b = (o + half) as usize;
+                    if voter[b] != i {
+                        voter[b] = i;
+                        votes[b] += 1;
+                    }
+                }
+            }
+            support += usize::from(on_side);
+        }
+        let (mut rival, mut offset) = (0usize, 0i64);
+        for (b, &v) in votes.iter().enumerate() {
+            let o = b as i64 - half;
+            if o.abs() >= min_offset && usize::from(v) > rival {
+                (rival, offset) = (usize::from(v), o);
+            }
+        }
+        let excess = rival as i64 - support as i64;
+        if excess > best_excess {
+            best_excess = excess;
+            best = Rival { side: s, support, rival, offset_px: offset as f64 };
+        }
+    }
+    best
+}
