@@ -87,3 +87,63 @@ pub(crate) fn strongest_rival(
     }
     best
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector2;
+
+    use super::*;
+    use crate::tracker::search::{Candidate, MAX_CANDIDATES};
+
+    /// One side of `count` points, each seeing edges at `offsets` (px from the fitted side,
+    /// which sits 0.3 px out from where the points were searched).
+    fn side(count: usize, offsets: impl Fn(usize) -> Vec<f32>) -> (Vec<TemplateEdge>, Vec<PointEdges>, Vec<f64>) {
+        let z = Vector2::zeros();
+        let sides = vec![TemplateEdge { first: 0, count, start: z, step: z, tangent: z }];
+        let fitted = vec![0.3; count];
+        let edges = (0..count)
+            .map(|i| {
+                let mut e = PointEdges::default();
+                for (k, h) in offsets(i).into_iter().take(MAX_CANDIDATES).enumerate() {
+                    e.candidates[k] = Candidate { h_px: h + 0.3, contrast: 30.0, ..Candidate::default() };
+                    e.count = k as u8 + 1;
+                }
+                e
+            })
+            .collect();
+        (sides, edges, fitted)
+    }
+
+    #[test]
+    fn a_parallel_edge_most_points_see_is_a_rival_that_outnumbers_the_side() {
+        // 8 of 24 points see the side's edge; 20 see one 7 px further out (a texture line the
+        // side slid off, or the face's edge the side slid off onto texture).
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = vec![7.2 - 0.02 * i as f32];
+            if i % 3 == 0 {
+                o.push(0.1);
+            }
+            if i >= 20 {
+                o.remove(0);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0);
+        assert_eq!((r.side, r.support), (0, 8), "{r:?}");
+        assert!(r.rival >= 19 && (r.offset_px - 7.0).abs() <= 1.0, "{r:?}");
+    }
+
+    #[test]
+    fn the_other_flank_of_a_thin_line_and_scattered_texture_are_no_rivals() {
+        // Every point sees the side's edge; most also see the other flank of a thin dark line
+        // 3 px out (nearer than the 5 px a rival must be), and texture edges scattered 5-10 px
+        // away that no straight line through them explains.
+        let (sides, edges, fitted) = side(24, |i| vec![0.2, 3.1, 5.0 + (i * 7 % 6) as f32, -5.0 - (i * 5 % 6) as f32]);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0);
+        assert_eq!(r.support, 24, "{r:?}");
+        assert!(r.rival < 24, "{r:?}");
+        // A point with two candidates on the same line counts once.
+        let (sides, edges, fitted) = side(24, |_| vec![6.0, 6.4]);
+        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0).rival, 24);
+    }
+}
