@@ -330,11 +330,20 @@ impl ContourTracker {
     /// [`strongest_rival`](super::wrong_lock::strongest_rival)).
     fn find_rival(&mut self, moved: &Placement) {
         let n = self.template.points().len();
+        // Where each point's search line meets its side as fitted (a side stays straight
+        // under the placement): `p + d n` on the line through `a` along `t`.
         self.fitted_px.clear();
-        for (i, q) in self.template.points().iter().enumerate() {
-            let p = moved.image_from_template(*q);
-            let d = (p.x - self.pos_x[i]) * self.nrm_x[i] + (p.y - self.pos_y[i]) * self.nrm_y[i];
-            self.fitted_px.push(d);
+        self.fitted_px.resize(n, 0.0);
+        let cross = |u: Vector2<f64>, v: Vector2<f64>| u.x * v.y - u.y * v.x;
+        for edge in self.template.edges.iter().filter(|e| e.count > 0) {
+            let a = moved.image_from_template(edge.start);
+            let t = moved.image_from_template(edge.start + edge.tangent) - a;
+            for i in edge.first..edge.first + edge.count {
+                let (p, normal) = (Vector2::new(self.pos_x[i], self.pos_y[i]), Vector2::new(self.nrm_x[i], self.nrm_y[i]));
+                let along = cross(t, normal);
+                // A side turned edge-on to its old normal has no offset: far outside any band.
+                self.fitted_px[i] = if along.abs() > 1e-9 * t.norm() { cross(t, a - p) / along } else { f64::INFINITY };
+            }
         }
         let band_px = 0.5 * self.config.inlier_px;
         self.rival = super::wrong_lock::strongest_rival(

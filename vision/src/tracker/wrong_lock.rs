@@ -48,26 +48,38 @@ pub(crate) fn strongest_rival(
     min_offset_px: f64,
 ) -> Rival {
     let half = (RIVAL_BINS / 2) as i64;
+    let half_f = half as f64;
     let min_offset = min_offset_px.max(2.0 * band_px + 1.0).ceil() as i64;
     let mut best = Rival::default();
     let mut best_excess = i64::MIN;
     for (s, side) in sides.iter().enumerate().filter(|(_, s)| s.count > 0) {
         let mut votes = [0u16; RIVAL_BINS];
-        // The last point that voted for each line.
-        let mut voter = [usize::MAX; RIVAL_BINS];
+        // The last point that voted for each line, counted from 1 along the side.
+        let mut voter = [0u16; RIVAL_BINS];
         let mut support = 0usize;
-        for i in side.first..side.first + side.count {
+        for (j, i) in (side.first..side.first + side.count).enumerate() {
+            let (j, fitted) = (j as u16 + 1, fitted_px[i]);
+            if !fitted.is_finite() {
+                continue;
+            }
             let mut on_side = false;
             for c in edges[i].as_slice() {
-                let r = f64::from(c.h_px) - fitted_px[i];
+                let r = f64::from(c.h_px) - fitted;
                 on_side |= r.abs() <= band_px;
-                let (lo, hi) = ((r - band_px).ceil() as i64, (r + band_px).floor() as i64);
-                for o in lo.max(-half)..=hi.min(half) {
-                    let b = (o + half) as usize;
-                    if voter[b] != i {
-                        voter[b] = i;
-                        votes[b] += 1;
-                    }
+                // Bins `lo..=hi` (offset + `half`, so never negative here): the lines within
+                // `band_px` of this edge. Truncation is `floor` for the positive values kept;
+                // `f64::floor` would be a library call on the baseline x86-64 target.
+                let (from, to) = (r - band_px + half_f, r + band_px + half_f);
+                if to < 0.0 || from > 2.0 * half_f {
+                    continue;
+                }
+                let lo = from.max(0.0) as usize;
+                let lo = if (lo as f64) < from { lo + 1 } else { lo };
+                let hi = (to.min(2.0 * half_f) as usize).min(RIVAL_BINS - 1);
+                for b in lo..=hi {
+                    // Without a branch: which point voted last is unpredictable.
+                    votes[b] += u16::from(voter[b] != j);
+                    voter[b] = j;
                 }
             }
             support += usize::from(on_side);
