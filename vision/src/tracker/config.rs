@@ -105,17 +105,24 @@ pub struct TrackerConfig {
     pub min_inlier_ratio_to_recent: f64,
     /// Lost when the inliers' RMS residual exceeds this, px.
     pub max_residual_px: f64,
-    /// Wrong-lock check (`tracker::wrong_lock`): a side's rival edge, parallel to it and
-    /// more than `inlier_px` away, counts when at least this many more of the side's points
-    /// found an edge on it than on the side (with ~25 points a side, 3 is more than the
-    /// one or two points a side's count moves from update to update on a steady track).
+    /// Wrong-lock check (`tracker::wrong_lock`, after each wide pass): a *rival* is a line
+    /// parallel to a side, at least `min_rival_offset_px` from it, on which at least this many
+    /// more of the side's points found an edge (within `inlier_px / 2`) than on the side as
+    /// fitted, and more than half of them. With ~25 points a side, 3 is more than the one or
+    /// two points a side's count moves by from update to update on a steady track.
     pub rival_margin_points: usize,
-    /// Nearest a rival edge may lie to its side, px.
+    /// Nearest a rival may lie to its side, px: beyond the fit's inlier band on both sides
+    /// (2 `inlier_px`) by a pixel. Nearer edges are the same physical edge's other flank (a
+    /// cube's edge shows as a thin line or bevel 2-3 px wide: the real left face's front edge
+    /// is such a pair, 3 px apart), which the inlier band already covers. The wrong locks on
+    /// the real sequence sit 6-11 px from the face's edge.
     pub min_rival_offset_px: f64,
-    /// Lost (`wrong_lock`) after this many updates in a row with a counting rival (0: never).
+    /// Lost (`wrong_lock`) after this many updates in a row with a rival (0: never check).
     /// On the face's true outline the wide pass pulls a side onto the edge most of its points
-    /// see within a few updates (the start from a polygon 3-5 px off snaps in 1-4); a third
-    /// of a second at 30 frames/s is past that and far short of what the servo may act on.
+    /// see within a few updates (a start 3-5 px off snaps in 1-4); a third of a second at
+    /// 30 frames/s is past that, and short of what a servo step acts on. The check needs the
+    /// wide pass over every point: with `coarse_stride` > 1, or when `short_first_px` skips
+    /// the wide pass, the count does not advance.
     pub max_rival_updates: usize,
     /// Lost when the contour is squashed (ratio of the singular values of the deformation
     /// since initialisation) beyond this.

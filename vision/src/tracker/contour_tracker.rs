@@ -353,7 +353,11 @@ impl ContourTracker {
             band_px,
             self.config.min_rival_offset_px,
         );
-        let outnumbered = self.rival.rival >= self.rival.support + self.config.rival_margin_points;
+        // A rival counts when it outnumbers the side by the margin and holds most of the
+        // side's points: a face's edge of low contrast (a crease between two faces of the
+        // same grey) that only some of its points see is no evidence against it.
+        let r = &self.rival;
+        let outnumbered = r.rival >= r.support + self.config.rival_margin_points && 2 * r.rival > r.count;
         self.rival_updates = if outnumbered { self.rival_updates + 1 } else { 0 };
     }
 

@@ -30,7 +30,8 @@ pub enum LostReason {
     /// Wrong lock: on `updates` wide passes in a row, `side` (corner `side` to `side + 1`)
     /// sat on an edge `support` of its points found while a parallel edge `offset_px` away
     /// (outward positive) was found by `rival` of them, at least
-    /// [`rival_margin_points`](super::TrackerConfig::rival_margin_points) more: the side slid
+    /// [`rival_margin_points`](super::TrackerConfig::rival_margin_points) more and most of
+    /// the side's points: the side slid
     /// onto a texture or neighbouring edge and the face's own edge is beside it.
     WrongLock { side: usize, offset_px: f64, support: usize, rival: usize, updates: usize },
 }

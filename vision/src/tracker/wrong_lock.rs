@@ -25,6 +25,8 @@ pub(crate) struct Rival {
     pub rival: usize,
     /// The rival line's offset from the fitted side along the outward normal, px.
     pub offset_px: f64,
+    /// Points on the side.
+    pub count: usize,
 }
 
 /// Per side, a histogram of where the points' candidate edges lie relative to the fitted
@@ -94,7 +96,7 @@ pub(crate) fn strongest_rival(
         let excess = rival as i64 - support as i64;
         if excess > best_excess {
             best_excess = excess;
-            best = Rival { side: s, support, rival, offset_px: offset as f64 };
+            best = Rival { side: s, support, rival, offset_px: offset as f64, count: side.count };
         }
     }
     best
