@@ -59,6 +59,10 @@ pub struct WatchCounts {
     /// Frame ids at which it was lost, and at which it was found again.
     pub losses: Vec<u64>,
     pub refinds: Vec<u64>,
+    /// Why each of `losses` happened: the tracker's lost reason (e.g. "wrong lock: …"), or
+    /// its confidence under the minimum.
+    #[serde(default)]
+    pub loss_reasons: Vec<String>,
 }
 
 /// One watched contour.
@@ -118,6 +122,11 @@ impl TrackWatch {
     pub fn step(&mut self, tracker: &mut ContourTracker, state: Option<&TrackState>, image: &ImageView<'_>, frame_id: u64, now_ns: u64) -> Option<WatchEvent> {
         let score = tracker.confidence().score;
         let confident = matches!(state, Some(s) if s.is_tracking()) && score.is_finite() && score >= self.min_score;
+        let min_score = self.min_score;
+        let why = || match state.and_then(|s| s.lost_reason()) {
+            Some(reason) => reason.to_string(),
+            None => format!("confidence {score:.2} under {min_score:.2}"),
+        };
         let predicted = self.predicted_shift_px(now_ns);
         let event = match &mut self.state {
             WatchState::Off => return None,
@@ -136,7 +145,7 @@ impl TrackWatch {
                     self.counts.acquired_frame_id = Some(frame_id);
                     Some(WatchEvent::Acquired)
                 } else {
-                    self.lose(tracker, frame_id, now_ns);
+                    self.lose(tracker, frame_id, now_ns, why());
                     Some(WatchEvent::Lost)
                 }
             }
@@ -144,14 +153,14 @@ impl TrackWatch {
                 if confident {
                     None
                 } else {
-                    self.lose(tracker, frame_id, now_ns);
+                    self.lose(tracker, frame_id, now_ns, why());
                     Some(WatchEvent::Lost)
                 }
             }
             WatchState::Confirming { frames } => {
                 *frames += 1;
                 if !confident {
-                    self.lose(tracker, frame_id, now_ns);
+                    self.lose(tracker, frame_id, now_ns, why());
                     None // still the same loss
                 } else if *frames >= CONFIRM_FRAMES {
                     self.state = WatchState::Tracking;
@@ -208,9 +217,11 @@ impl TrackWatch {
         if d.norm() > MAX_PREDICTED_SHIFT_PX { d * (MAX_PREDICTED_SHIFT_PX / d.norm()) } else { d }
     }
 
-    fn lose(&mut self, tracker: &ContourTracker, frame_id: u64, now_ns: u64) {
+    fn lose(&mut self, tracker: &ContourTracker, frame_id: u64, now_ns: u64, why: String) {
         if !matches!(self.state, WatchState::Confirming { .. }) {
+            tracing::info!(tracker = %self.counts.name, frame_id, reason = %why, "observe: lost");
             self.counts.losses.push(frame_id);
+            self.counts.loss_reasons.push(why);
         }
         let frame = self.last_good.map_or_else(|| tracker.frame(), |(f, _)| f);
         let search = ShiftSearch::new(SEARCH, frame, self.predicted_shift_px(now_ns));

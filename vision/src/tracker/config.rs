@@ -105,6 +105,25 @@ pub struct TrackerConfig {
     pub min_inlier_ratio_to_recent: f64,
     /// Lost when the inliers' RMS residual exceeds this, px.
     pub max_residual_px: f64,
+    /// Wrong-lock check (`tracker::wrong_lock`, after each wide pass): a *rival* is a line
+    /// parallel to a side, at least `min_rival_offset_px` from it, on which at least this many
+    /// more of the side's points found an edge (within `inlier_px / 2`) than on the side as
+    /// fitted, and more than half of them. With ~25 points a side, 3 is more than the one or
+    /// two points a side's count moves by from update to update on a steady track.
+    pub rival_margin_points: usize,
+    /// Nearest a rival may lie to its side, px: beyond the fit's inlier band on both sides
+    /// (2 `inlier_px`) by a pixel. Nearer edges are the same physical edge's other flank (a
+    /// cube's edge shows as a thin line or bevel 2-3 px wide: the real left face's front edge
+    /// is such a pair, 3 px apart), which the inlier band already covers. The wrong locks on
+    /// the real sequence sit 6-11 px from the face's edge.
+    pub min_rival_offset_px: f64,
+    /// Lost (`wrong_lock`) after this many updates in a row with a rival (0: never check).
+    /// On the face's true outline the wide pass pulls a side onto the edge most of its points
+    /// see within a few updates (a start 3-5 px off snaps in 1-4); a third of a second at
+    /// 30 frames/s is past that, and short of what a servo step acts on. The check needs the
+    /// wide pass over every point: with `coarse_stride` > 1, or when `short_first_px` skips
+    /// the wide pass, the count does not advance.
+    pub max_rival_updates: usize,
     /// Lost when the contour is squashed (ratio of the singular values of the deformation
     /// since initialisation) beyond this.
     pub max_squash: f64,
@@ -158,6 +177,9 @@ impl Default for TrackerConfig {
             min_edge_fraction: 0.3,
             min_inlier_fraction: 0.3,
             max_residual_px: 1.2,
+            rival_margin_points: 3,
+            min_rival_offset_px: 5.0,
+            max_rival_updates: 10,
             min_direction_support: 0.35,
             min_inlier_ratio_to_recent: 0.65,
             max_squash: 8.0,
@@ -213,6 +235,14 @@ impl TrackerConfig {
         check(unit(self.min_edge_fraction), "min_edge_fraction", self.min_edge_fraction, "0..=1")?;
         check(unit(self.min_inlier_fraction), "min_inlier_fraction", self.min_inlier_fraction, "0..=1")?;
         check(self.max_residual_px > 0.0, "max_residual_px", self.max_residual_px, "> 0 px")?;
+        check((1..=1000).contains(&self.rival_margin_points), "rival_margin_points", self.rival_margin_points as f64, "1..=1000")?;
+        check(
+            self.min_rival_offset_px >= 0.0 && self.min_rival_offset_px <= MAX_SEARCH_PX,
+            "min_rival_offset_px",
+            self.min_rival_offset_px,
+            "0..=40 px",
+        )?;
+        check(self.max_rival_updates <= 100_000, "max_rival_updates", self.max_rival_updates as f64, "0..=100000")?;
         check(unit(self.min_direction_support), "min_direction_support", self.min_direction_support, "0..=1")?;
         check(unit(self.min_inlier_ratio_to_recent), "min_inlier_ratio_to_recent", self.min_inlier_ratio_to_recent, "0..=1")?;
         check(self.max_squash >= 1.0, "max_squash", self.max_squash, ">= 1")?;

@@ -96,6 +96,12 @@ pub struct ContourTracker {
     side_of: Vec<u16>,
     /// The search of all the points' normals.
     lines: ContourSearch,
+    /// Scratch: the first pass's fitted contour's offset along each point's search line, px.
+    fitted_px: Vec<f64>,
+    /// The strongest rival edge the first pass of the last update saw.
+    rival: super::wrong_lock::Rival,
+    /// Updates in a row whose wide pass saw a rival edge outnumber its side's.
+    rival_updates: usize,
 }
 
 /// Every `stride`-th of a side's `count` points, centred on the side: the first one's index
@@ -165,6 +171,9 @@ impl ContourTracker {
             subset_inside: vec![-1.0; n],
             subset_side: vec![0; n],
             lines: ContourSearch::new(),
+            fitted_px: Vec::with_capacity(n),
+            rival: super::wrong_lock::Rival::default(),
+            rival_updates: 0,
         };
         tracker.restart(frame);
         tracker
@@ -181,6 +190,8 @@ impl ContourTracker {
         self.confidence = Confidence::default();
         self.recent_inliers = 0.0;
         self.updates = 0;
+        self.rival = super::wrong_lock::Rival::default();
+        self.rival_updates = 0;
         for v in [&mut self.pos_x, &mut self.pos_y, &mut self.rel_x, &mut self.rel_y, &mut self.nrm_x, &mut self.nrm_y] {
             v.clear();
             v.resize(n, 0.0);
@@ -253,6 +264,9 @@ impl ContourTracker {
                 self.updates += 1;
                 return self.state;
             };
+            if pass == 0 && stride == 1 && self.config.max_rival_updates > 0 {
+                self.find_rival(&moved);
+            }
             current = moved;
             // A pass that barely moved any corner would be searched again at the same places:
             // skip the remaining passes (not after a subset: the checks need every point).
@@ -310,6 +324,41 @@ impl ContourTracker {
             .map(|c| (moved.image_from_template(*c) - placement.image_from_template(*c)).norm())
             .fold(0.0, f64::max);
         Some((moved, moved_px))
+    }
+
+    /// After a wide pass: the strongest rival edge of any side (see
+    /// [`strongest_rival`](super::wrong_lock::strongest_rival)).
+    fn find_rival(&mut self, moved: &Placement) {
+        let n = self.template.points().len();
+        // Where each point's search line meets its side as fitted (a side stays straight
+        // under the placement): `p + d n` on the line through `a` along `t`.
+        self.fitted_px.clear();
+        self.fitted_px.resize(n, 0.0);
+        let cross = |u: Vector2<f64>, v: Vector2<f64>| u.x * v.y - u.y * v.x;
+        for edge in self.template.edges.iter().filter(|e| e.count > 0) {
+            let a = moved.image_from_template(edge.start);
+            let t = moved.image_from_template(edge.start + edge.tangent) - a;
+            for i in edge.first..edge.first + edge.count {
+                let (p, normal) = (Vector2::new(self.pos_x[i], self.pos_y[i]), Vector2::new(self.nrm_x[i], self.nrm_y[i]));
+                let along = cross(t, normal);
+                // A side turned edge-on to its old normal has no offset: far outside any band.
+                self.fitted_px[i] = if along.abs() > 1e-9 * t.norm() { cross(t, a - p) / along } else { f64::INFINITY };
+            }
+        }
+        let band_px = 0.5 * self.config.inlier_px;
+        self.rival = super::wrong_lock::strongest_rival(
+            &self.template.edges,
+            &self.edges[..n],
+            &self.fitted_px,
+            band_px,
+            self.config.min_rival_offset_px,
+        );
+        // A rival counts when it outnumbers the side by the margin and holds most of the
+        // side's points: a face's edge of low contrast (a crease between two faces of the
+        // same grey) that only some of its points see is no evidence against it.
+        let r = &self.rival;
+        let outnumbered = r.rival >= r.support + self.config.rival_margin_points && 2 * r.rival > r.count;
+        self.rival_updates = if outnumbered { self.rival_updates + 1 } else { 0 };
     }
 
     /// Places the points for `placement` and searches their normals: every point, or with
@@ -476,6 +525,16 @@ impl ContourTracker {
         }
         if c.residual_px > self.config.max_residual_px {
             return Some(LostReason::ResidualTooLarge { rms_px: c.residual_px });
+        }
+        if self.config.max_rival_updates > 0 && self.rival_updates >= self.config.max_rival_updates {
+            let r = self.rival;
+            return Some(LostReason::WrongLock {
+                side: r.side,
+                offset_px: r.offset_px,
+                support: r.support,
+                rival: r.rival,
+                updates: self.rival_updates,
+            });
         }
         let det = frame.det();
         if det.signum() != self.initial_det.signum() || det == 0.0 {

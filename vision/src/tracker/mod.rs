@@ -18,9 +18,11 @@
 //! 4. **Refine**: search again with a short range around the fitted contour and refit.
 //! 5. **Judge**: share of points with an edge, share of inliers and whether they pin the
 //!    contour down in every direction, a sudden collapse of that share, the inlier residual,
-//!    frame degeneracy, leaving the image. Failing any is the *lost* state with its
-//!    [`LostReason`]; the servo must stop on it. Otherwise the points' polarity, contrast and
-//!    inside grey level are learnt.
+//!    frame degeneracy, leaving the image, and a wrong lock (`wrong_lock`: after each wide
+//!    pass, a side whose own points see a parallel edge 5 px or more away more often than the
+//!    edge the fit put it on, for 10 updates in a row). Failing any is the *lost* state with
+//!    its [`LostReason`]; the servo must stop on it. Otherwise the points' polarity, contrast
+//!    and inside grey level are learnt.
 //!
 //! Choices the thesis leaves open, and why (all measured on the real `visp-cube` sequence and
 //! the synthetic tests in `vision/tests/`):
@@ -70,6 +72,7 @@ mod simd;
 mod state;
 mod stereo;
 pub mod synth;
+mod wrong_lock;
 
 pub use config::{TrackerConfigError, EdgeSign, TrackerConfig};
 pub use contour::{Template, TemplateError, MIN_POINTS};

@@ -27,6 +27,13 @@ pub enum LostReason {
     FlippedBasis,
     /// A computation produced a non-finite number.
     NotFinite,
+    /// Wrong lock: on `updates` wide passes in a row, `side` (corner `side` to `side + 1`)
+    /// sat on an edge `support` of its points found while a parallel edge `offset_px` away
+    /// (outward positive) was found by `rival` of them, at least
+    /// [`rival_margin_points`](super::TrackerConfig::rival_margin_points) more and most of
+    /// the side's points: the side slid
+    /// onto a texture or neighbouring edge and the face's own edge is beside it.
+    WrongLock { side: usize, offset_px: f64, support: usize, rival: usize, updates: usize },
 }
 
 impl LostReason {
@@ -42,6 +49,7 @@ impl LostReason {
             LostReason::DegenerateBasis { .. } => "degenerate_basis",
             LostReason::FlippedBasis => "flipped_basis",
             LostReason::NotFinite => "not_finite",
+            LostReason::WrongLock { .. } => "wrong_lock",
         }
     }
 }
@@ -75,6 +83,11 @@ impl fmt::Display for LostReason {
             }
             LostReason::FlippedBasis => write!(f, "frame flipped over"),
             LostReason::NotFinite => write!(f, "non-finite numbers in the fit"),
+            LostReason::WrongLock { side, offset_px, support, rival, updates } => write!(
+                f,
+                "wrong lock: side {side} is on an edge {support} of its points found, a parallel edge {offset_px:+.0} px away \
+                 was found by {rival}, for {updates} updates in a row"
+            ),
         }
     }
 }
