@@ -125,54 +125,54 @@ pub fn mask_and_fill(img: &mut ImageBuf, poly: &[[f64; 2]], margin_px: f64) -> u
 /// two): at each pixel along it, the largest difference of the grey levels 2 px either side
 /// of points up to 3 px off the line. 0 for a segment off the image or under 4 px.
 pub fn edge_support(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len = dx.hypot(dy);
-    if len.is_nan() || len < 4.0 {
-        return 0.0;
-    }
-    let (nx, ny) = (-dy / len, dx / len);
-    let at = |x: f64, y: f64| -> Option<f64> {
-        let (xi, yi) = (x.round(), y.round());
-        (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width && (yi as usize) < img.height).then(|| f64::from(img.get(xi as usize, yi as usize)))
-    };
-    let steps = len.floor() as usize;
-    let mut hits = 0;
-    for i in 0..=steps {
-        let t = i as f64 / steps as f64;
-        let (x, y) = (a[0] + t * dx, a[1] + t * dy);
-        let step = |d: f64| -> Option<f64> { Some((at(x + (d + 2.0) * nx, y + (d + 2.0) * ny)? - at(x + (d - 2.0) * nx, y + (d - 2.0) * ny)?).abs()) };
+    let (mut hits, mut n) = (0usize, 0usize);
+    let walked = walk_segment(img, a, b, |across| {
+        // The step at `d` px off the line: the pixels 2 px either side of it, along the normal.
+        let step = |d: f64| Some((across(d + 2.0)? - across(d - 2.0)?).abs());
+        n += 1;
         if (-3..=3).filter_map(|d| step(f64::from(d))).any(|s| s >= 12.0) {
             hits += 1;
         }
-    }
-    hits as f64 / (steps + 1) as f64
+    });
+    if walked { hits as f64 / n as f64 } else { 0.0 }
 }
 
 /// How strongly the image steps across the segment `a`-`b` exactly on it (tracker pixels):
 /// the mean absolute difference of the pixels 2 px either side along its normal, grey levels.
 /// Unlike [`edge_support`] it has no slack across the segment, so it peaks where the edge is.
 pub fn edge_strength(img: &ImageBuf, a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len = dx.hypot(dy);
-    if len.is_nan() || len < 4.0 {
-        return 0.0;
-    }
-    let (nx, ny) = (-dy / len, dx / len);
-    let at = |x: f64, y: f64| -> Option<f64> {
-        let (xi, yi) = (x.round(), y.round());
-        (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width && (yi as usize) < img.height).then(|| f64::from(img.get(xi as usize, yi as usize)))
-    };
-    let steps = len.floor() as usize;
     let (mut sum, mut n) = (0.0, 0usize);
-    for i in 0..=steps {
-        let t = i as f64 / steps as f64;
-        let (x, y) = (a[0] + t * dx, a[1] + t * dy);
-        if let (Some(p), Some(q)) = (at(x + 2.0 * nx, y + 2.0 * ny), at(x - 2.0 * nx, y - 2.0 * ny)) {
+    walk_segment(img, a, b, |across| {
+        if let (Some(p), Some(q)) = (across(2.0), across(-2.0)) {
             sum += (p - q).abs();
             n += 1;
         }
-    }
+    });
     if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// Walks the segment `a`-`b` one pixel at a time (both ends included) and hands `visit`, at
+/// each point, the grey level `d` px off it along its normal (`None` off the image). Returns
+/// false, visiting nothing, for a segment under 4 px or with NaN ends: too short to say
+/// anything about an edge.
+fn walk_segment(img: &ImageBuf, a: [f64; 2], b: [f64; 2], mut visit: impl FnMut(&dyn Fn(f64) -> Option<f64>)) -> bool {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len = dx.hypot(dy);
+    if len.is_nan() || len < 4.0 {
+        return false;
+    }
+    let (nx, ny) = (-dy / len, dx / len);
+    let steps = len.floor() as usize;
+    for i in 0..=steps {
+        let t = i as f64 / steps as f64;
+        let (x, y) = (a[0] + t * dx, a[1] + t * dy);
+        let across = |d: f64| -> Option<f64> {
+            let (xi, yi) = ((x + d * nx).round(), (y + d * ny).round());
+            (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width && (yi as usize) < img.height).then(|| f64::from(img.get(xi as usize, yi as usize)))
+        };
+        visit(&across);
+    }
+    true
 }
 
 /// The segment `a`-`b` moved along `dir` (a unit image direction) by the shift, within
