@@ -49,7 +49,7 @@ fn robot_command_offsets_match_the_readme() {
 
 #[test]
 fn telemetry_offsets_match_the_readme() {
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (528, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (600, 8));
     assert_eq!(offset_of!(Telemetry, phase), 4);
     assert_eq!(offset_of!(Telemetry, frame_id), 8);
     assert_eq!(offset_of!(Telemetry, time_ns), 16);
@@ -65,4 +65,12 @@ fn telemetry_offsets_match_the_readme() {
     assert_eq!(offset_of!(Telemetry, planning), 420);
     assert_eq!(offset_of!(Telemetry, reason), 424);
     assert_eq!(offset_of!(Telemetry, dropped_frames), 520);
+    assert_eq!(offset_of!(Telemetry, pointing_update_ns), 528);
+    assert_eq!(offset_of!(Telemetry, pointing_state), 536);
+    assert_eq!(offset_of!(Telemetry, pointing_frame), 540);
+    assert_eq!(offset_of!(Telemetry, pointing_point_m), 544);
+    assert_eq!(offset_of!(Telemetry, pointing_sigma_m), 552);
+    assert_eq!(offset_of!(Telemetry, pointing_crossing_rad), 556);
+    assert_eq!(offset_of!(Telemetry, pointing_tip_px), 560);
+    assert_eq!(offset_of!(Telemetry, pointing_line_px), 576);
 }
