@@ -31,12 +31,6 @@ pub(crate) struct Rival {
 
 /// Per side, a histogram of where the points' candidate edges lie relative to the fitted
 /// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
-/// axis as the candidates' `h_px`). The fitted side's support is the points with an edge
-/// within `band_px` of it; a rival's, the points with an edge within `band_px` of a parallel
-/// line at least `2 band_px` (whole px, plus one) away, so that no point counts for both.
-/// Returns the side whose best rival outnumbers its support the most. Allocates nothing.
-/// Per side, a histogram of where the points' candidate edges lie relative to the fitted
-/// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
 /// axis as the candidates' `h_px`). The side's support is the points with an edge within
 /// `band_px` of it; a rival's, the points with an edge within `band_px` of a parallel line at
 /// least `min_offset_px` (and more than `2 band_px`) away, so that no edge counts for both.
