@@ -203,20 +203,9 @@ mod tests {
             .unwrap();
         bytes[16..20].copy_from_slice(&declared.0.to_be_bytes());
         bytes[20..24].copy_from_slice(&declared.1.to_be_bytes());
-        let crc = crc32(&bytes[12..29]);
+        let crc = crc32fast::hash(&bytes[12..29]);
         bytes[29..33].copy_from_slice(&crc.to_be_bytes());
         bytes
-    }
-
-    fn crc32(data: &[u8]) -> u32 {
-        let mut c = !0u32;
-        for &b in data {
-            c ^= b as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
-            }
-        }
-        !c
     }
 
     use image::ImageEncoder;
