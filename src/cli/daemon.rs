@@ -232,15 +232,15 @@ fn observe(args: &DaemonArgs, config: DaemonConfig, hint: Option<OperatorHint>) 
             .iter()
             .map(|t| format!("{} tracked {} lost {} ({} losses, {} re-found)", t.name, t.tracked_frames, t.lost_frames, t.losses.len(), t.refinds.len()))
             .collect();
+        // No contour watched (--plane alone): no tracker counts to print.
+        let tracking = if trackers.is_empty() {
+            String::new()
+        } else {
+            format!("; {}; tracker update p50 {:.0} µs, p99 {:.0} µs", trackers.join("; "), r.tracker_update.us_p50, r.tracker_update.us_p99)
+        };
         println!(
-            "daemon: observed {} frames ({}), {} dropped, camera {:.1} frames/s; {}; tracker update p50 {:.0} µs, p99 {:.0} µs",
-            r.frames,
-            r.end,
-            r.camera.dropped_frames,
-            r.camera.camera_rate_hz,
-            trackers.join("; "),
-            r.tracker_update.us_p50,
-            r.tracker_update.us_p99
+            "daemon: observed {} frames ({}), {} dropped, camera {:.1} frames/s{tracking}",
+            r.frames, r.end, r.camera.dropped_frames, r.camera.camera_rate_hz,
         );
         if let Some(p) = &r.pointing {
             let last = p.answered.last().and_then(|g| g.point_m.map(|m| format!(" (the last at ({:.3}, {:.3}) m, sigma {:.1} mm)", m[0], m[1], g.sigma_mm.unwrap_or(f64::NAN))));
