@@ -14,7 +14,7 @@
 //! the `point` phase's closed loop), at the bound, which would judge the module's accuracy on
 //! one hard gesture rather than observe mode's plumbing.
 //!
-//! The plane file is the example `scenarios/point_clutter3.plane.toml`: the four lower cage
+//! The plane file is the example `scenarios/planes/point_clutter3.toml`: the four lower cage
 //! points and their pixels, which stand in for four table marks an operator clicks in both
 //! views (README, "Pointing at camera frames"). The test first checks that its pixels are the
 //! scenario cameras' images of those points (the example stays true), then judges the
@@ -46,7 +46,7 @@ const POINT_PARK_M: [f64; 3] = [0.18, 0.0, 0.14];
 const HAND_AT_S: f64 = 0.5;
 /// The answer's largest distance from where the hand aimed (issue 19's median bound).
 const MAX_ERROR_M: f64 = 0.010;
-const PLANE_FILE: &str = "point_clutter3.plane.toml";
+const PLANE_FILE: &str = "planes/point_clutter3.toml";
 /// The `--random-layout` seed whose gesture is rendered (see the module docs).
 const LAYOUT_SEED: u64 = 1;
 

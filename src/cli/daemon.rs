@@ -52,7 +52,7 @@ point, sigma, both views' finger lines), a log line per gesture, observe.json \"
 update time) and overlays (pointed, point_refused: the finger lines and the point). FILE
 (TOML) gives four or more points of the working plane, each with its plane coordinates and
 its pixel in both views (README, \"Pointing at camera frames\"; an example:
-scenarios/point_clutter3.plane.toml). Start with the hand out of view: the first frame is the
+scenarios/planes/point_clutter3.toml). Start with the hand out of view: the first frame is the
 scene without it. --hint is then optional; --mono cannot be used (pointing needs both views).
 
 Every time-out and the tracker's time step are camera time: the frames' capture stamps
@@ -68,7 +68,7 @@ Examples:
   # two cameras, target and gripper, views checked against a calibrated stereo model
   handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json
   # where does the operator point? (the plane's points measured in both views)
-  handeye daemon --observe --plane scenarios/point_clutter3.plane.toml --out obs
+  handeye daemon --observe --plane scenarios/planes/point_clutter3.toml --out obs
   handeye monitor --telemetry      # another terminal: the pointed point, live";
 
 /// The daemon's arguments; the help text is [`DAEMON_HELP`].
