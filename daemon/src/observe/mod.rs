@@ -15,6 +15,8 @@
 
 pub mod plane;
 pub mod pointing;
+#[cfg(test)]
+mod pointing_tests;
 pub mod report;
 pub mod service;
 pub mod watch;
