@@ -2,7 +2,9 @@
 //! camera frames, with no robot. Every frame goes, copied, to the gesture tracker on its own
 //! thread ([`crate::gesture_thread`], as in the point phase): the per-frame contour tracking
 //! never waits for it (a frame that finds every buffer in flight is not handed over, and
-//! counted). The plane maps come from the plane file ([`super::plane`]), not from a
+//! counted), unless `timing.worker_wait_ms` asks for lockstep as in the point phase (a due
+//! result is then waited for, so that what is answered on which frame does not depend on the
+//! machine's speed: for tests; the default 0 never waits). The plane maps come from the plane file ([`super::plane`]), not from a
 //! calibration. The first frame is the scene without the hand (start observing with the hand
 //! out of view); quiet frames renew it as the light drifts.
 //!
@@ -83,7 +85,7 @@ pub struct PointingReport {
     pub answered: Vec<ObservedGesture>,
     pub refused: Vec<ObservedGesture>,
     /// Frames handed to the gesture tracker, and frames not handed over (every buffer in
-    /// flight: the tracker was behind).
+    /// flight: the tracker was behind; or a frame of another size than the first).
     pub frames_submitted: u64,
     pub frames_not_submitted: u64,
     /// The gesture tracker's update (both views, on its thread), µs; `cycles`: results.
@@ -94,6 +96,8 @@ pub struct PointingReport {
 pub struct PointingWatch {
     plane: WorkingPlane,
     config: GestureConfig,
+    /// How long a due gesture result is waited for (`timing.worker_wait_ms`; 0: never).
+    due_wait: Duration,
     thread: Option<GestureThread>,
     record: PointingRecord,
     update: LatencyHistogram,
@@ -109,12 +113,17 @@ pub struct PointingWatch {
     refused: Vec<ObservedGesture>,
     /// The newest result's state, for the telemetry's reason and the overlays.
     newest: Option<GestureState>,
+    /// The image size the plane file was checked against; frames of another size (a new
+    /// camera) are not handed over, and counted.
+    size: (usize, usize),
+    other_size: u64,
 }
 
 impl PointingWatch {
     pub fn new(plane: WorkingPlane, cfg: &DaemonConfig) -> Self {
         Self {
             config: GestureConfig { max_sigma_m: cfg.point().max_sigma_m, ..GestureConfig::default() },
+            due_wait: Duration::from_millis(cfg.timing.worker_wait_ms),
             plane,
             thread: None,
             record: PointingRecord::default(),
@@ -128,6 +137,8 @@ impl PointingWatch {
             answered: Vec::new(),
             refused: Vec::new(),
             newest: None,
+            size: (0, 0),
+            other_size: 0,
         }
     }
 
@@ -137,11 +148,12 @@ impl PointingWatch {
     }
 
     /// On the first frame: checks the plane file's pixels against the image size, starts the
-    /// gesture thread (never waiting for it) and makes this frame the scene without the hand.
+    /// gesture thread and makes this frame the scene without the hand.
     pub fn start(&mut self, left: &ImageView<'_>, right: &ImageView<'_>) -> Result<(), PointingStartError> {
         self.plane.check_image_size(left.width(), left.height())?;
+        self.size = (left.width(), left.height());
         let tracker = PointingTracker::new(self.plane.pointing, self.config);
-        let mut thread = GestureThread::spawn(tracker, left.width(), left.height(), Duration::ZERO).map_err(PointingStartError::Thread)?;
+        let mut thread = GestureThread::spawn(tracker, left.width(), left.height(), self.due_wait).map_err(PointingStartError::Thread)?;
         // A fresh thread has every buffer free: this cannot be refused.
         thread.set_background(left, right);
         self.thread = Some(thread);
@@ -155,6 +167,15 @@ impl PointingWatch {
     /// overlay (`pointed`, `point_refused`), if one happened.
     pub fn frame(&mut self, frame_index: u64, frame_id: u64, capture_time_ns: u64, now_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Option<&'static str> {
         let thread = self.thread.as_mut()?;
+        if (left.width(), left.height()) != self.size {
+            // The plane's pixels and the background belong to the first camera's images.
+            if self.other_size == 0 {
+                tracing::warn!(width = left.width(), height = left.height(), "observe: frames of another size than the first: pointing paused until they are {}x{} again", self.size.0, self.size.1);
+            }
+            self.other_size += 1;
+            self.not_submitted += 1;
+            return None;
+        }
         let result = thread.poll(frame_index);
         if thread.submit(frame_index, frame_id, left, right) {
             self.record.submitted();
