@@ -27,6 +27,9 @@ pub struct Snapshot {
     /// reported them (NaN: none).
     pub finger_line_px: [[f32; 3]; 2],
     pub finger_tip_px: [[f32; 2]; 2],
+    /// The indicated point in each view, px, when the caller knows it (observe mode's plane
+    /// maps): marked with a cross.
+    pub point_px: Option<[[f64; 2]; 2]>,
 }
 
 impl Snapshot {
@@ -41,6 +44,7 @@ impl Snapshot {
             tracker_state: t.tracker_state,
             finger_line_px: t.pointing_line_px,
             finger_tip_px: t.pointing_tip_px,
+            point_px: None,
         }
     }
 }
@@ -188,6 +192,9 @@ pub fn overlay(s: &Snapshot) -> RgbImage {
         if tip.iter().all(|x| x.is_finite()) {
             ring(&mut img, tip, dx, 5.0, FINGER);
         }
+        if let Some(p) = s.point_px.map(|p| p[v]).filter(|p| p.iter().all(|x| x.is_finite())) {
+            cross(&mut img, p, dx, 7.0, FINGER);
+        }
     }
     img
 }
@@ -316,6 +323,8 @@ mod tests {
             // A horizontal finger line at v = 40 in the right view, its tip at u = 60.
             finger_line_px: [[f32::NAN; 3], [0.0, 1.0, -40.0]],
             finger_tip_px: [[f32::NAN; 2], [60.0, 40.0]],
+            // The indicated point marked in the left view only (the right one off the image).
+            point_px: Some([[50.0, 20.0], [f64::NAN, 5.0]]),
         };
         let img = overlay(&s);
         assert_eq!(img.dimensions(), (200, 80));
@@ -324,5 +333,7 @@ mod tests {
         assert_eq!(*img.get_pixel(60, 50), Rgb([50, 50, 50]), "nothing drawn in the left half for a right tracker");
         assert_eq!(*img.get_pixel(100 + 20, 40), FINGER, "the finger's line across the right view");
         assert_eq!(*img.get_pixel(20, 40), Rgb([50, 50, 50]), "no finger line in the left view");
+        assert_eq!(*img.get_pixel(50, 20), FINGER, "the indicated point's cross in the left view");
+        assert_eq!(*img.get_pixel(155, 15), Rgb([50, 50, 50]), "no cross for a point that is not finite");
     }
 }

@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use handeye_daemon::observe::service::{run as run_observe, ObserveServiceOptions};
 use handeye_daemon::stereo_model::StereoModelFile;
+use handeye_daemon::observe::plane::WorkingPlane;
 use handeye_daemon::observe::ObserveOptions;
 use handeye_daemon::service::{run as run_service, ServiceOptions};
 use handeye_daemon::{DaemonConfig, OperatorHint};
@@ -43,6 +44,17 @@ gone\") within stale_frame_ms, and the daemon waits for it to come back. It ends
 Ctrl-C or SIGTERM (exit 0), or --end-after-gone-s after the camera left; --out writes
 observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
 
+With --observe --plane FILE it also reads the operator's pointing gestures from the frames
+(the point phase's gesture tracker, on its own thread; the tracking never waits for it) and
+reports where on the working plane the finger points, live: telemetry pointing_* (state,
+point, sigma, both views' finger lines), a log line per gesture, observe.json \"pointing\"
+(every answer with its sigma, frame id and capture time, every refusal with its reason, the
+update time) and overlays (pointed, point_refused: the finger lines and the point). FILE
+(TOML) gives four or more points of the working plane, each with its plane coordinates and
+its pixel in both views (README, \"Pointing at camera frames\"; an example:
+scenarios/planes/point_clutter3.toml). Start with the hand out of view: the first frame is the
+scene without it. --hint is then optional; --mono cannot be used (pointing needs both views).
+
 Every time-out and the tracker's time step are camera time: the frames' capture stamps
 (a gap in the frame ids is counted as dropped frames; daemon.json \"camera\").
 
@@ -54,7 +66,10 @@ Examples:
   handeye feed --mono --dir ../shared/data/visp-cube --loop &
   handeye daemon --observe --mono --hint top-face.json --out obs
   # two cameras, target and gripper, views checked against a calibrated stereo model
-  handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json";
+  handeye daemon --observe --hint hint.json --gripper-hint plate.json --stereo-model out/report/stereo_model.json
+  # where does the operator point? (the plane's points measured in both views)
+  handeye daemon --observe --plane scenarios/planes/point_clutter3.toml --out obs
+  handeye monitor --telemetry      # another terminal: the pointed point, live";
 
 /// The daemon's arguments; the help text is [`DAEMON_HELP`].
 #[derive(Args)]
@@ -80,7 +95,8 @@ pub struct DaemonArgs {
     /// (NN_plan.png: facets, grasp sites, the chosen one; plan.json), the servo error plot
     /// (servo_convergence.svg), stereo_model.json (the calibrated camera model, for
     /// --observe --stereo-model) and daemon.json (the outcome). With --observe:
-    /// observe.json, observe_plot.svg and overlays (acquired, lost, refound, end).
+    /// observe.json, observe_plot.svg and overlays (acquired, lost, refound, end; pointed,
+    /// point_refused with --plane).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Print the outcome as one JSON object: success, phase_reached, final_phase,
@@ -97,9 +113,16 @@ pub struct DaemonArgs {
     #[arg(long)]
     print_config: bool,
     /// Observe only: no robot, no commands; track the --hint target (and --gripper-hint
-    /// plate) and publish telemetry every frame until stopped.
-    #[arg(long, requires = "hint", conflicts_with = "point_m")]
+    /// plate), read pointing gestures with --plane, and publish telemetry every frame until
+    /// stopped. Needs --hint, --plane or both.
+    #[arg(long, conflicts_with = "point_m")]
     observe: bool,
+    /// With --observe: the working plane's points (TOML: four or more [[points]], each with
+    /// plane_m = [x, y] in metres and its pixel in both views, left_px and right_px;
+    /// optional plane_z_m): read the operator's pointing gestures and report the pointed
+    /// point live. Needs both views (not --mono).
+    #[arg(long, value_name = "FILE", requires = "observe")]
+    plane: Option<PathBuf>,
     /// With --observe: the gripper plate's outline in both views (hint.json format; its
     /// depth_mm is not used).
     #[arg(long, value_name = "FILE", requires = "observe")]
@@ -178,7 +201,13 @@ pub fn run(args: DaemonArgs) -> Result<()> {
 
 /// `handeye daemon --observe`.
 fn observe(args: &DaemonArgs, config: DaemonConfig, hint: Option<OperatorHint>) -> Result<()> {
-    let hint = hint.context("--observe needs --hint")?;
+    if hint.is_none() && args.plane.is_none() {
+        anyhow::bail!("--observe needs --hint (a target to track), --plane (pointing gestures to read), or both");
+    }
+    if args.plane.is_some() && args.mono {
+        anyhow::bail!("--plane needs both views (the pointed point is where the finger's lines of the two views meet on the plane): it cannot be used with --mono");
+    }
+    let plane = args.plane.as_deref().map(WorkingPlane::load).transpose()?;
     let gripper_hint = args.gripper_hint.as_deref().map(OperatorHint::load).transpose()?;
     let epipolar = args.stereo_model.as_deref().map(StereoModelFile::load).transpose()?.map(|m| m.epipolar());
     if !args.json {
@@ -187,7 +216,7 @@ fn observe(args: &DaemonArgs, config: DaemonConfig, hint: Option<OperatorHint>) 
     let result = run_observe(ObserveServiceOptions {
         domain: args.domain.domain.clone(),
         config,
-        observe: ObserveOptions { hint, gripper_hint, mono: args.mono, epipolar },
+        observe: ObserveOptions { hint, gripper_hint, mono: args.mono, epipolar, plane },
         report_dir: args.out.clone(),
         end_after_gone: args.end_after_gone_s.map(std::time::Duration::from_secs_f64),
     })?;
@@ -203,16 +232,29 @@ fn observe(args: &DaemonArgs, config: DaemonConfig, hint: Option<OperatorHint>) 
             .iter()
             .map(|t| format!("{} tracked {} lost {} ({} losses, {} re-found)", t.name, t.tracked_frames, t.lost_frames, t.losses.len(), t.refinds.len()))
             .collect();
+        // No contour watched (--plane alone): no tracker counts to print.
+        let tracking = if trackers.is_empty() {
+            String::new()
+        } else {
+            format!("; {}; tracker update p50 {:.0} µs, p99 {:.0} µs", trackers.join("; "), r.tracker_update.us_p50, r.tracker_update.us_p99)
+        };
         println!(
-            "daemon: observed {} frames ({}), {} dropped, camera {:.1} frames/s; {}; tracker update p50 {:.0} µs, p99 {:.0} µs",
-            r.frames,
-            r.end,
-            r.camera.dropped_frames,
-            r.camera.camera_rate_hz,
-            trackers.join("; "),
-            r.tracker_update.us_p50,
-            r.tracker_update.us_p99
+            "daemon: observed {} frames ({}), {} dropped, camera {:.1} frames/s{tracking}",
+            r.frames, r.end, r.camera.dropped_frames, r.camera.camera_rate_hz,
         );
+        if let Some(p) = &r.pointing {
+            let last = p.answered.last().and_then(|g| g.point_m.map(|m| format!(" (the last at ({:.3}, {:.3}) m, sigma {:.1} mm)", m[0], m[1], g.sigma_mm.unwrap_or(f64::NAN))));
+            println!(
+                "daemon: pointing: {} gesture(s) seen, {} answered{}, {} refused; gesture update p50 {:.0} µs over {} frames ({} not handed over)",
+                p.gestures_seen,
+                p.answered.len(),
+                last.unwrap_or_default(),
+                p.refused.len(),
+                p.update.us_p50,
+                p.update.cycles,
+                p.frames_not_submitted
+            );
+        }
     }
     Ok(())
 }

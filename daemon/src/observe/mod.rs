@@ -5,11 +5,18 @@
 //! stereo model when one is given, and publishes telemetry every frame. It never publishes a
 //! command: it does not even open the command service. A lost track is searched for around
 //! its last pose and its predicted one ([`watch`], [`crate::track_search`]) while telemetry
-//! says `lost`, and picked up when it reappears.
+//! says `lost`, and picked up when it reappears. Given the working plane's points
+//! (`--plane`, [`plane`]), it also reads the operator's pointing gestures from the frames and
+//! reports the pointed point live ([`pointing`]: the point phase's gesture tracker on its own
+//! thread), gesture after gesture.
 //!
 //! [`ObserveLoop`] is the per-frame work without I/O (tests drive it in-process);
 //! [`service`] runs it on a domain's services; [`report`] is `observe.json` and its plot.
 
+pub mod plane;
+pub mod pointing;
+#[cfg(test)]
+mod pointing_tests;
 pub mod report;
 pub mod service;
 pub mod watch;
@@ -24,7 +31,9 @@ use crate::camera_clock::CameraClock;
 use crate::config::DaemonConfig;
 use crate::outcome::TrackerTiming;
 use crate::timing::LatencyHistogram;
-use report::{EpipolarStats, ObserveReport, SeriesRow};
+use plane::WorkingPlane;
+use pointing::{PointingStartError, PointingWatch};
+use report::{EpipolarStats, LoopTiming, ObserveReport, SeriesRow};
 use watch::{TrackWatch, WatchEvent};
 
 /// The telemetry's tracker slots, in its order.
@@ -44,8 +53,8 @@ const MAX_SERIES_ROWS: usize = 2_000;
 /// What observe mode is given besides the daemon's configuration.
 #[derive(Debug, Clone)]
 pub struct ObserveOptions {
-    /// The target facet's outline (`hint.json`).
-    pub hint: OperatorHint,
+    /// The target facet's outline (`hint.json`), if a target is to be tracked.
+    pub hint: Option<OperatorHint>,
     /// The gripper plate's outline, if it is to be tracked too.
     pub gripper_hint: Option<OperatorHint>,
     /// The stream's two views are one camera (`feed --mono`, `camera --mono`): track the
@@ -53,15 +62,20 @@ pub struct ObserveOptions {
     pub mono: bool,
     /// The stereo pair's epipolar constraint: the two views' tracks are checked against it.
     pub epipolar: Option<EpipolarConstraint>,
+    /// The working plane's points in both views: read pointing gestures (`--plane`).
+    pub plane: Option<WorkingPlane>,
 }
 
-/// A hint whose outline cannot start a tracker.
+/// Why observe mode cannot start with these options.
 #[derive(Debug, thiserror::Error)]
-#[error("{which} hint, {view} view: {detail}")]
-pub struct ObserveError {
-    pub which: &'static str,
-    pub view: &'static str,
-    pub detail: String,
+pub enum ObserveError {
+    /// A hint whose outline cannot start a tracker.
+    #[error("{which} hint, {view} view: {detail}")]
+    Hint { which: &'static str, view: &'static str, detail: String },
+    #[error("--plane needs both views (the pointed point is where the finger's lines of the two views meet on the plane); a --mono stream has one")]
+    PlaneNeedsTwoViews,
+    #[error("nothing to observe: give a target (--hint), the working plane for pointing (--plane), or both")]
+    NothingToWatch,
 }
 
 /// Observe mode's state between frames.
@@ -85,14 +99,22 @@ pub struct ObserveLoop {
     epipolar_over: u64,
     camera_gone: u32,
     frames: u64,
+    /// Pointing gestures (`--plane`).
+    pointing: Option<PointingWatch>,
 }
 
 impl ObserveLoop {
     pub fn new(cfg: DaemonConfig, options: ObserveOptions) -> Result<Self, ObserveError> {
+        if options.plane.is_some() && options.mono {
+            return Err(ObserveError::PlaneNeedsTwoViews);
+        }
+        if options.hint.is_none() && options.plane.is_none() {
+            return Err(ObserveError::NothingToWatch);
+        }
         let mut trackers = StereoTrackerSet::new();
         let target_min = cfg.target.min_score.max(cfg.safety.min_target_score);
         let mut watches = SLOTS.map(|(_, _, name)| TrackWatch::off(name));
-        let hints = [(Role::Target, Some(&options.hint), "target"), (Role::Gripper, options.gripper_hint.as_ref(), "gripper")];
+        let hints = [(Role::Target, options.hint.as_ref(), "target"), (Role::Gripper, options.gripper_hint.as_ref(), "gripper")];
         for (role, hint, which) in hints {
             let Some(hint) = hint else { continue };
             let (tracker_cfg, converge, min) = match role {
@@ -103,7 +125,7 @@ impl ObserveLoop {
                 if options.mono && view == View::Right {
                     continue;
                 }
-                let t = ContourTracker::new(tracker_cfg, poly).map_err(|e| ObserveError { which, view: side, detail: e.to_string() })?;
+                let t = ContourTracker::new(tracker_cfg, poly).map_err(|e| ObserveError::Hint { which, view: side, detail: e.to_string() })?;
                 trackers.insert(role, view, t);
                 let slot = SLOTS.iter().position(|s| s.0 == role && s.1 == view).unwrap_or(0);
                 watches[slot] = TrackWatch::acquiring(SLOTS[slot].2, converge, min);
@@ -111,6 +133,7 @@ impl ObserveLoop {
         }
         let clock = CameraClock::new(cfg.timing.frame_rate_hz);
         let deadline_ns = cfg.timing.deadline_us * 1000;
+        let pointing = options.plane.map(|p| PointingWatch::new(p, &cfg));
         Ok(Self {
             cfg,
             epipolar: if options.mono { None } else { options.epipolar },
@@ -126,13 +149,31 @@ impl ObserveLoop {
             epipolar_over: 0,
             camera_gone: 0,
             frames: 0,
+            pointing,
         })
+    }
+
+    /// On the first frame, with `--plane`: checks the plane's pixels against the image size
+    /// and starts the gesture tracker, this frame its scene without the hand. Without
+    /// `--plane`, or once started, nothing.
+    pub fn start_pointing(&mut self, left: &ImageView<'_>, right: &ImageView<'_>) -> Result<(), PointingStartError> {
+        match self.pointing.as_mut() {
+            Some(p) if !p.started() => p.start(left, right),
+            _ => Ok(()),
+        }
+    }
+
+    /// The newest indicated point in both views, px (`--plane`; `None` without one).
+    pub fn pointed_px(&self) -> Option<[[f64; 2]; 2]> {
+        self.pointing.as_ref().and_then(PointingWatch::pointed_px)
     }
 
     /// Processes one frame (id and capture stamp from its header): updates the running
     /// trackers, advances each watch (searching for lost ones), checks the views against the
-    /// stereo model, fills the telemetry. Returns the label of a key moment worth an
-    /// overlay (`acquired`, `lost`, `refound`), if one happened.
+    /// stereo model, hands the frame to the gesture tracker and takes its due result (once
+    /// [`Self::start_pointing`] started it), fills the telemetry. Returns the label of a key
+    /// moment worth an overlay (`acquired`, `lost`, `refound`, `pointed`, `point_refused`),
+    /// if one happened.
     pub fn cycle(&mut self, frame_id: u64, capture_time_ns: u64, left: &ImageView<'_>, right: &ImageView<'_>) -> Option<&'static str> {
         self.frames += 1;
         let tick = self.clock.tick(frame_id, capture_time_ns);
@@ -155,6 +196,10 @@ impl ObserveLoop {
             if let Some(e) = event {
                 tracing::info!(tracker = SLOTS[i].2, frame_id, event = ?e, "observe");
             }
+        }
+        if let Some(p) = self.pointing.as_mut() {
+            let event = p.frame(self.frames, frame_id, capture_time_ns, tick.now_ns, left, right);
+            moment = moment.or(event);
         }
         let epipolar_px = self.check_epipolar();
         self.fill_telemetry(frame_id, update_ns, epipolar_px);
@@ -242,7 +287,10 @@ impl ObserveLoop {
         let acquiring = self.watches.iter().any(|w| matches!(w.state, watch::WatchState::Acquiring { .. }));
         let confirming: Vec<&str> =
             SLOTS.iter().zip(&self.watches).filter(|(_, w)| matches!(w.state, watch::WatchState::Confirming { .. })).map(|(s, _)| s.2).collect();
-        let mut reason = if !lost.is_empty() {
+        let watching = self.watches.iter().any(|w| w.telemetry_state() != 0);
+        let mut reason = if !watching {
+            String::new()
+        } else if !lost.is_empty() {
             format!("lost: {} (searching)", lost.join(", "))
         } else if !confirming.is_empty() {
             format!("found again, confirming: {}", confirming.join(", "))
@@ -253,6 +301,11 @@ impl ObserveLoop {
         };
         if let Some(px) = epipolar_px.filter(|&px| px > self.cfg.target.max_epipolar_px) {
             reason.push_str(&format!("; views disagree ({px:.1} px epipolar)"));
+        }
+        if let Some(p) = self.pointing.as_mut() {
+            p.fill_telemetry(t);
+            let status = p.status();
+            reason = if reason.is_empty() { status } else { format!("{reason}; {status}") };
         }
         t.set_reason(&reason);
     }
@@ -318,8 +371,7 @@ impl ObserveLoop {
                 us_mean: tt.mean_ns() / 1000.0,
                 cycles: tt.count(),
             },
-            loop_us_p50: us(self.loop_timing.percentile_ns(50.0)),
-            loop_us_p99: us(self.loop_timing.percentile_ns(99.0)),
+            loop_us: LoopTiming { p50: us(self.loop_timing.percentile_ns(50.0)), p99: us(self.loop_timing.percentile_ns(99.0)) },
             epipolar: self.epipolar.map(|_| EpipolarStats {
                 frames: e.count(),
                 rms_px_p50: px(e.percentile_ns(50.0)),
@@ -327,6 +379,7 @@ impl ObserveLoop {
                 limit_px: self.cfg.target.max_epipolar_px,
                 over_limit_frames: self.epipolar_over,
             }),
+            pointing: self.pointing.as_ref().map(PointingWatch::report),
             end: end.to_string(),
             wall_s,
         }
@@ -371,10 +424,11 @@ mod tests {
 
     fn run(left: &ImageBuf, right: &ImageBuf, dy_right: f64) -> (ObserveLoop, Vec<Telemetry>) {
         let options = ObserveOptions {
-            hint: hint(square(120.0, 140.0, 40.0), square(100.0, 140.0 + dy_right, 40.0)),
+            hint: Some(hint(square(120.0, 140.0, 40.0), square(100.0, 140.0 + dy_right, 40.0))),
             gripper_hint: Some(hint(square(120.0, 28.0, 40.0), square(100.0, 28.0 + dy_right, 40.0))),
             mono: false,
             epipolar: Some(same_rows()),
+            plane: None,
         };
         let mut ol = ObserveLoop::new(DaemonConfig::default(), options).unwrap();
         let mut seen = Vec::new();

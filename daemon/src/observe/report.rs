@@ -1,11 +1,13 @@
 //! Observe mode's report: `observe.json` ([`ObserveReport`]: frames, drops and the camera's
 //! rate from the capture stamps, per tracker the frames tracked and lost, when it was lost
-//! and found again, the trackers' update time) and `observe_plot.svg` (confidence of every
-//! watched contour and the stereo tracker update time over the stream's camera time).
+//! and found again, the trackers' update time; with `--plane`, the pointing gestures:
+//! [`super::pointing::PointingReport`]) and `observe_plot.svg` (confidence of every watched
+//! contour and the stereo tracker update time over the stream's camera time).
 
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::pointing::PointingReport;
 use super::watch::WatchCounts;
 use crate::camera_clock::ClockStats;
 use crate::outcome::TrackerTiming;
@@ -25,13 +27,23 @@ pub struct ObserveReport {
     /// The stereo tracker update per frame (all running contours), µs.
     pub tracker_update: TrackerTiming,
     /// Frame received → telemetry published, µs.
-    pub loop_us_p50: f64,
-    pub loop_us_p99: f64,
+    pub loop_us: LoopTiming,
     /// The two views' tracks against the stereo model (`None` without one).
     pub epipolar: Option<EpipolarStats>,
+    /// The pointing gestures read (`None` without `--plane`).
+    #[serde(default)]
+    pub pointing: Option<PointingReport>,
     /// How the run ended: `stream ended`, `interrupted`.
     pub end: String,
     pub wall_s: f64,
+}
+
+/// Frame received → telemetry published, µs (histogram bucket edges).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoopTiming {
+    pub p50: f64,
+    pub p99: f64,
 }
 
 /// The views' agreement: per frame with a contour tracked in both views, the RMS epipolar
@@ -150,9 +162,9 @@ mod tests {
             camera_gone: 0,
             trackers: vec![WatchCounts { name: "target_left".into(), acquired_frame_id: Some(15), tracked_frames: 218, ..WatchCounts::default() }],
             tracker_update: TrackerTiming { us_p50: 30.0, us_p99: 60.0, us_max: 90.0, us_mean: 32.0, cycles: 218 },
-            loop_us_p50: 50.0,
-            loop_us_p99: 90.0,
+            loop_us: LoopTiming { p50: 50.0, p99: 90.0 },
             epipolar: None,
+            pointing: None,
             end: "stream ended".into(),
             wall_s: 7.5,
         };

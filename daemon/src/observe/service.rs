@@ -8,7 +8,9 @@
 //! for one); the daemon keeps running and picks the stream up
 //! when a publisher comes back (the subscriber stays attached to the service, and a new
 //! publisher's frames reach it). It ends on SIGINT/SIGTERM, or when the camera has been gone
-//! for `end_after_gone` (the stream ended).
+//! for `end_after_gone` (the stream ended). With `--plane`, the first frame's size is checked
+//! against the plane file's pixels (a pixel outside the image ends the run with an error
+//! naming it) and pointing gestures are read from then on.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -80,12 +82,17 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
                 else {
                     return Err(ServiceError::Setup("camera frames are not GRAY8 views".into()));
                 };
+                // The first frame: the plane's pixels checked against its size, the gesture
+                // tracker started on it (with --plane).
+                ol.start_pointing(&left, &right).map_err(|e| ServiceError::Setup(e.to_string()))?;
                 let moment = ol.cycle(frame.frame_id(), frame.header().capture_time_ns, &left, &right);
                 let t = *ol.finish_cycle(monotonic_ns().saturating_sub(receive_ns));
                 telemetry.send(&t)?;
                 if let Some(rep) = report.as_mut() {
                     if let Some(label) = moment {
-                        rep.submit(ReportJob::Overlay(Box::new(Snapshot::take(label, &left, &right, &t))));
+                        let mut snapshot = Snapshot::take(label, &left, &right, &t);
+                        snapshot.point_px = ol.pointed_px();
+                        rep.submit(ReportJob::Overlay(Box::new(snapshot)));
                     }
                     // The end's picture: the last frame, kept cheaply (copied every 15 frames).
                     if t.frame_id % 15 == 0 || last_snapshot.is_none() {

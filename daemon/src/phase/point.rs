@@ -98,7 +98,7 @@ fn plate_tracked(c: &Cycle<'_>) -> bool {
 }
 
 /// The refusal or the answer of a gesture that ended, for the record; `None` while it goes on.
-fn record(r: &GestureResult, time_ns: u64, plane_z_m: f64) -> Option<GestureRecord> {
+pub(crate) fn record(r: &GestureResult, time_ns: u64, plane_z_m: f64) -> Option<GestureRecord> {
     let base = |outcome: &str, detail: String| GestureRecord {
         frame_id: r.frame_id,
         time_s: time_ns as f64 * 1e-9,
