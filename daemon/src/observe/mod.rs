@@ -153,12 +153,12 @@ impl ObserveLoop {
         })
     }
 
-    /// On the first frame, with `--plane`: checks the plane's pixels against the image size
-    /// and starts the gesture tracker, this frame its scene without the hand. Without
-    /// `--plane`, or once started, nothing.
-    pub fn start_pointing(&mut self, left: &ImageView<'_>, right: &ImageView<'_>) -> Result<(), PointingStartError> {
+    /// On every frame until it has started, with `--plane`: checks the first frame's size
+    /// against the plane's pixels and starts the gesture tracker once the view stands still,
+    /// that frame its scene without the hand. Without `--plane`, or once started, nothing.
+    pub fn start_pointing(&mut self, left: &ImageView<'_>, right: &ImageView<'_>, capture_time_ns: u64) -> Result<(), PointingStartError> {
         match self.pointing.as_mut() {
-            Some(p) if !p.started() => p.start(left, right),
+            Some(p) if !p.started() => p.start(left, right, capture_time_ns),
             _ => Ok(()),
         }
     }

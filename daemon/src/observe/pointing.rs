@@ -5,8 +5,13 @@
 //! counted), unless `timing.worker_wait_ms` asks for lockstep as in the point phase (a due
 //! result is then waited for, so that what is answered on which frame does not depend on the
 //! machine's speed: for tests; the default 0 never waits). The plane maps come from the plane file ([`super::plane`]), not from a
-//! calibration. The first frame is the scene without the hand (start observing with the hand
-//! out of view); quiet frames renew it as the light drifts.
+//! calibration. The scene without the hand is the first frame after which the view stood still
+//! for [`STILL_START_FRAMES`] (a hand coming in as observing starts is not taken for the
+//! scene; start with the hand out of view: a hand held still from the very first frame is);
+//! quiet frames renew it as the light drifts. A changed scene that then stands still for
+//! [`RENEW_AFTER_S`] (a block moved for good, or a hand that was in the first frames and has
+//! gone) becomes the scene: a gesture is never that long, and without this no hand would be
+//! absent again.
 //!
 //! Each gesture (a hand in view until it has gone) is reported once it is read: its first
 //! answer (`indicated`: the point, its one-sigma radius, the frame and its capture time) and
@@ -38,6 +43,73 @@ pub const MAX_KEPT: usize = 500;
 /// Frames handed over whose capture time is remembered until their result comes back: more
 /// than the gesture thread keeps in flight.
 const CAPTURES_KEPT: usize = 16;
+
+/// Frames the view must stand still (beside the first) before that first frame is taken as
+/// the scene without the hand: a hand moving in is never still for 0.1 s at 30 Hz.
+pub const STILL_START_FRAMES: u32 = 3;
+/// A scene that differs from the gesture tracker's and stands still this long becomes its
+/// scene, s of camera time: longer than any gesture holds (a person holds 1-3 s).
+pub const RENEW_AFTER_S: f64 = 10.0;
+/// Every `STILL_STEP_PX`-th pixel of every `STILL_STEP_PX`-th row is compared between frames.
+const STILL_STEP_PX: usize = 4;
+/// Samples that may change between frames in a still view (a few hot pixels or a flicker);
+/// a hand moving changes hundreds.
+const STILL_MAX_CHANGED: usize = 4;
+
+/// Whether the view stands still: a subsampled frame-to-frame difference (~40 kB, a few µs).
+#[derive(Debug, Default)]
+struct Stillness {
+    previous: Vec<u8>,
+    current: Vec<u8>,
+    /// Grey levels a sample must change by to count (the silhouette's threshold: noise is a
+    /// few).
+    min_difference: u8,
+    /// Frames in a row with (almost) nothing changed, and since when (camera ns).
+    still_frames: u32,
+    still_since_ns: Option<u64>,
+}
+
+impl Stillness {
+    fn new(min_difference: u8) -> Self {
+        Self { min_difference, ..Self::default() }
+    }
+
+    /// One frame at `now_ns`.
+    fn frame(&mut self, left: &ImageView<'_>, right: &ImageView<'_>, now_ns: u64) {
+        self.current.clear();
+        for v in [left, right] {
+            for y in (0..v.height()).step_by(STILL_STEP_PX) {
+                self.current.extend(v.row(y)[..v.width()].iter().step_by(STILL_STEP_PX));
+            }
+        }
+        let same_size = self.previous.len() == self.current.len();
+        let changed = self.previous.iter().zip(&self.current).filter(|(a, b)| a.abs_diff(**b) > self.min_difference).count();
+        if same_size && changed <= STILL_MAX_CHANGED {
+            self.still_frames = self.still_frames.saturating_add(1);
+            self.still_since_ns.get_or_insert(now_ns);
+        } else {
+            self.still_frames = 0;
+            self.still_since_ns = None;
+        }
+        std::mem::swap(&mut self.previous, &mut self.current);
+    }
+
+    /// Still for `frames` frames after the first.
+    fn still_for_frames(&self, frames: u32) -> bool {
+        self.still_frames >= frames
+    }
+
+    /// Still for `s` seconds at `now_ns`.
+    fn still_for_s(&self, s: f64, now_ns: u64) -> bool {
+        self.still_since_ns.is_some_and(|t| now_ns.saturating_sub(t) as f64 * 1e-9 >= s)
+    }
+
+    /// Start counting again (the scene was just taken).
+    fn restart(&mut self) {
+        self.still_frames = 0;
+        self.still_since_ns = None;
+    }
+}
 
 /// Why pointing could not start on the first frame.
 #[derive(Debug, thiserror::Error)]
@@ -90,6 +162,9 @@ pub struct PointingReport {
     pub frames_not_submitted: u64,
     /// The gesture tracker's update (both views, on its thread), µs; `cycles`: results.
     pub update: TrackerTiming,
+    /// Times a changed scene that stood still [`RENEW_AFTER_S`] became the scene.
+    #[serde(default)]
+    pub scene_renewals: u64,
 }
 
 /// The gesture tracker and what it saw.
@@ -117,6 +192,9 @@ pub struct PointingWatch {
     /// camera) are not handed over, and counted.
     size: (usize, usize),
     other_size: u64,
+    /// Whether the view stands still: when to take the scene, and when to renew it.
+    stillness: Stillness,
+    scene_renewals: u64,
 }
 
 impl PointingWatch {
@@ -139,6 +217,8 @@ impl PointingWatch {
             newest: None,
             size: (0, 0),
             other_size: 0,
+            stillness: Stillness::new(GestureConfig::default().silhouette.min_difference),
+            scene_renewals: 0,
         }
     }
 
@@ -147,16 +227,28 @@ impl PointingWatch {
         self.thread.is_some()
     }
 
-    /// On the first frame: checks the plane file's pixels against the image size, starts the
-    /// gesture thread and makes this frame the scene without the hand.
-    pub fn start(&mut self, left: &ImageView<'_>, right: &ImageView<'_>) -> Result<(), PointingStartError> {
-        self.plane.check_image_size(left.width(), left.height())?;
-        self.size = (left.width(), left.height());
+    /// On every frame until it has started (`now_ns`: camera time): the first frame's size
+    /// is checked against the plane file's pixels; once the view has stood still for
+    /// [`STILL_START_FRAMES`], the gesture thread starts with this frame as the scene without
+    /// the hand.
+    pub fn start(&mut self, left: &ImageView<'_>, right: &ImageView<'_>, now_ns: u64) -> Result<(), PointingStartError> {
+        if self.size == (0, 0) {
+            self.plane.check_image_size(left.width(), left.height())?;
+            self.size = (left.width(), left.height());
+        }
+        if (left.width(), left.height()) != self.size {
+            return Ok(()); // frame() counts it
+        }
+        self.stillness.frame(left, right, now_ns);
+        if !self.stillness.still_for_frames(STILL_START_FRAMES) {
+            return Ok(());
+        }
         let tracker = PointingTracker::new(self.plane.pointing, self.config);
         let mut thread = GestureThread::spawn(tracker, left.width(), left.height(), self.due_wait).map_err(PointingStartError::Thread)?;
         // A fresh thread has every buffer free: this cannot be refused.
         thread.set_background(left, right);
         self.thread = Some(thread);
+        self.stillness.restart();
         self.record.start(self.plane.plane_z_m, self.plane.fit_rms_px().iter().copied().fold(0.0, f64::max));
         tracing::info!(file = %self.plane.file.display(), points = self.plane.points.len(), "observe: watching for pointing gestures");
         Ok(())
@@ -175,6 +267,13 @@ impl PointingWatch {
             self.other_size += 1;
             self.not_submitted += 1;
             return None;
+        }
+        self.stillness.frame(left, right, now_ns);
+        if self.in_view && self.stillness.still_for_s(RENEW_AFTER_S, now_ns) && thread.set_background(left, right) {
+            // Something changed for good (or the first frames held the hand): the scene now.
+            self.scene_renewals += 1;
+            self.stillness.restart();
+            tracing::warn!(frame_id, renewals = self.scene_renewals, "observe: the view changed and stood still {RENEW_AFTER_S} s: it is the scene without the hand now");
         }
         let result = thread.poll(frame_index);
         if thread.submit(frame_index, frame_id, left, right) {
@@ -240,7 +339,7 @@ impl PointingWatch {
     pub fn status(&self) -> String {
         match self.newest {
             None if self.started() => "pointing: no hand yet".into(),
-            None => "pointing: waiting for the first frame".into(),
+            None => "pointing: waiting for a still view (the scene without the hand)".into(),
             Some(GestureState::Absent) => "pointing: no hand".into(),
             Some(GestureState::Moving { .. }) => "pointing: a hand, not still yet".into(),
             Some(GestureState::Indicated(p)) => format!("pointing: at ({:.3}, {:.3}) m", p.point_m[0], p.point_m[1]),
@@ -271,6 +370,7 @@ impl PointingWatch {
             frames_submitted: self.record.summary().map_or(0, |s| s.frames_submitted),
             frames_not_submitted: self.not_submitted,
             update: TrackerTiming { us_p50: us(u.percentile_ns(50.0)), us_p99: us(u.percentile_ns(99.0)), us_max: us(u.max_ns()), us_mean: u.mean_ns() / 1000.0, cycles: u.count() },
+            scene_renewals: self.scene_renewals,
         }
     }
 }

@@ -122,9 +122,7 @@ impl Stream {
     fn show(&mut self, views: &[ImageBuf; 2], frames: usize) {
         for _ in 0..frames {
             let (l, r) = (views[0].view(), views[1].view());
-            if self.id == 0 {
-                self.ol.start_pointing(&l, &r).unwrap();
-            }
+            self.ol.start_pointing(&l, &r, capture_ns(self.id)).unwrap();
             if let Some(m) = self.ol.cycle(self.id, capture_ns(self.id), &l, &r) {
                 self.moments.push((self.id, m));
             }
@@ -195,4 +193,47 @@ fn each_gesture_is_answered_or_refused_once_live_and_watching_goes_on() {
     let last = s.seen.last().unwrap();
     assert_eq!(PointingState::from_u32(last.pointing_state), Some(PointingState::Absent));
     assert_eq!(last.reason_text(), "pointing: no hand");
+}
+
+/// `scene` with one more block where there was none: moved there for good.
+fn with_block(scene: &ImageBuf) -> ImageBuf {
+    let mut img = scene.clone();
+    for y in 300..340 {
+        for x in 420..470 {
+            img.set(x, y, 150);
+        }
+    }
+    img
+}
+
+#[test]
+fn a_scene_changed_for_good_becomes_the_scene_and_a_hand_coming_in_at_the_start_is_not_it() {
+    let rig = Rig::new();
+    let options = ObserveOptions { hint: None, gripper_hint: None, mono: false, epipolar: None, plane: Some(rig.plane_file()) };
+    let mut cfg = DaemonConfig::default();
+    cfg.timing.worker_wait_ms = 5_000;
+    let ol = ObserveLoop::new(cfg, options).unwrap();
+    let mut s = Stream { ol, id: 0, moments: Vec::new(), seen: Vec::new() };
+    let table = [scene(1), scene(2)];
+    let target = Vector3::new(0.40, 0.03, PLANE_Z_M);
+    // Observing starts while a hand comes in (each frame a little further): not the scene.
+    for k in 0..6 {
+        s.show(&rig.arm(&table, target, back(160.0, 50.0), 0.30 - 0.02 * k as f64), 1);
+    }
+    s.show(&table, 5);
+    assert!(s.seen[10].reason_text().starts_with("pointing: no hand"), "started on the table only: {}", s.seen[10].reason_text());
+    // A block is put down in view and stays: a change, but no hand; after RENEW_AFTER_S it is
+    // the scene, and the next hand is read against it.
+    let moved = [with_block(&table[0]), with_block(&table[1])];
+    let frames_to_renew = (super::pointing::RENEW_AFTER_S * 1e9 / PERIOD_NS as f64) as usize + 5;
+    s.show(&moved, frames_to_renew);
+    assert_eq!(PointingState::from_u32(s.seen.last().unwrap().pointing_state), Some(PointingState::Absent), "{}", s.seen.last().unwrap().reason_text());
+    s.show(&rig.arm(&moved, target, back(160.0, 50.0), 0.14), 40);
+    s.show(&moved, 20);
+    let report = s.ol.report(1.0, "stream ended").pointing.expect("a pointing section");
+    assert_eq!(report.scene_renewals, 1, "{report:#?}");
+    assert_eq!(report.answered.len(), 1, "only the hand is answered: {report:#?}");
+    let p = report.answered[0].point_m.unwrap();
+    assert!((p[0] - target.x).hypot(p[1] - target.y) < 0.004, "{p:?}");
+    assert_eq!(PointingState::from_u32(s.seen.last().unwrap().pointing_state), Some(PointingState::Absent));
 }

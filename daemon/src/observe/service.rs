@@ -82,9 +82,9 @@ pub fn run(options: ObserveServiceOptions) -> Result<ObserveResult, ServiceError
                 else {
                     return Err(ServiceError::Setup("camera frames are not GRAY8 views".into()));
                 };
-                // The first frame: the plane's pixels checked against its size, the gesture
-                // tracker started on it (with --plane).
-                ol.start_pointing(&left, &right).map_err(|e| ServiceError::Setup(e.to_string()))?;
+                // Until it has started (with --plane): the first frame's size checked against
+                // the plane's pixels, the gesture tracker started once the view stands still.
+                ol.start_pointing(&left, &right, frame.header().capture_time_ns).map_err(|e| ServiceError::Setup(e.to_string()))?;
                 let moment = ol.cycle(frame.frame_id(), frame.header().capture_time_ns, &left, &right);
                 let t = *ol.finish_cycle(monotonic_ns().saturating_sub(receive_ns));
                 telemetry.send(&t)?;
