@@ -186,6 +186,7 @@ impl PointPhase {
         let Some(r) = result else { return };
         m.pointing.result(&r);
         let absent = matches!(r.state, GestureState::Absent);
+        m.pointing.hand_at(time_ns, !absent);
         match &mut self.stage {
             Stage::Withdraw { gone, .. } => *gone = absent,
             Stage::Watch { refused } if absent => {
