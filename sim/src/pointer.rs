@@ -180,6 +180,14 @@ fn gesture_seed(scenario_seed: u64, k: u64) -> u64 {
 /// The person behind the gestures: points again, from a new direction, when the robot did
 /// not react to a gesture (`[pointer] repeats`). Watches the arm only (where the tool is),
 /// as a person would; never the daemon's telemetry.
+///
+/// A reaction is the arm *staying* somewhere else than where it stood when the hand went
+/// (it went for the block, or back to work): a person waits while the arm moves, and when it
+/// has come back to where it waited and stands there (the robot busied itself with
+/// something else: a hold for a lost view, the cage visited again) and still does nothing
+/// for `repeat_after_s`, points again. Only the tool's distance from that place counts, so
+/// the parked arm's settling and a hold's stop (well under a millimetre) never read as a
+/// reaction.
 #[derive(Debug, Clone)]
 pub struct PointerOperator {
     cfg: PointerConfig,
@@ -189,13 +197,17 @@ pub struct PointerOperator {
     made: u64,
     /// Where the tool was when the current gesture's hand had gone.
     tool_at_end: Option<DVec3>,
-    /// The arm moved more than 2 cm since then: the robot reacted.
-    reacted: bool,
+    /// The last time the tool was away from there (more than [`REACTED_M`]), ns.
+    away_ns: Option<u64>,
     /// The earlier gestures' truth, as the judge needs it.
     pub earlier: Vec<PointerGesture>,
 }
 
-/// How far the tool must move after a gesture for the operator to take it as understood, m.
+/// How far the tool must be from where it stood when the hand went for the operator to see
+/// that the robot is doing something, m: a person a metre away sees a move of a couple of
+/// centimetres; the parked arm's settling and a hold's stop move it well under 1 mm, and the
+/// smallest move the daemon makes after an answer (back from the point phase's park to the
+/// calibration's) is about 12 cm.
 const REACTED_M: f64 = 0.02;
 
 impl PointerOperator {
@@ -207,7 +219,7 @@ impl PointerOperator {
             scenario_seed: scenario.seed,
             made: 1,
             tool_at_end: None,
-            reacted: false,
+            away_ns: None,
             earlier: Vec::new(),
         })
     }
@@ -215,20 +227,31 @@ impl PointerOperator {
     /// At `now_ns`, with the tool at `tool_m`: the next gesture when it is time for one
     /// (the caller makes it the current one; the old one goes to [`Self::earlier`]).
     pub fn watch(&mut self, now_ns: u64, current: &PointerGesture, tool_m: DVec3) -> Option<PointerGesture> {
-        if now_ns < current.end_ns() || self.reacted {
+        if now_ns < current.end_ns() {
             return None;
         }
-        let at_end = *self.tool_at_end.get_or_insert(tool_m);
-        if (tool_m - at_end).length() > REACTED_M {
-            self.reacted = true;
+        let at_end = *self.tool_at_end.get_or_insert_with(|| {
+            tracing::info!(gesture = self.made, t_s = now_ns as f64 * 1e-9, tool_m = ?tool_m.to_array(), "operator: the hand has gone; watching the arm");
+            tool_m
+        });
+        let moved_m = (tool_m - at_end).length();
+        if moved_m > REACTED_M {
+            if self.away_ns.is_none() {
+                tracing::info!(gesture = self.made, t_s = now_ns as f64 * 1e-9, tool_m = ?tool_m.to_array(), moved_m, "operator: the robot is moving");
+            }
+            self.away_ns = Some(now_ns);
             return None;
         }
-        if self.made > u64::from(self.cfg.repeats) || now_ns < current.end_ns() + s_to_ns(self.cfg.repeat_after_s) {
+        // Since the hand went, or since the arm came back to where it waited.
+        let quiet_since_ns = self.away_ns.unwrap_or(0).max(current.end_ns());
+        if self.made > u64::from(self.cfg.repeats) || now_ns < quiet_since_ns + s_to_ns(self.cfg.repeat_after_s) {
             return None;
         }
+        tracing::info!(gesture = self.made + 1, t_s = now_ns as f64 * 1e-9, tool_m = ?tool_m.to_array(), moved_m, "operator: no reaction; pointing again");
         let next = PointerGesture::draw_at(&self.cfg, self.intended_m, gesture_seed(self.scenario_seed, self.made), now_ns);
         self.made += 1;
         self.tool_at_end = None;
+        self.away_ns = None;
         Some(next)
     }
 }
@@ -304,13 +327,41 @@ mod tests {
         let second = op.watch(end + s(4.0), &first, still).expect("the robot did not move: point again");
         assert!(second.azimuth_deg != first.azimuth_deg, "from a new direction");
         assert_eq!(second.hold_s()[0], (end + s(4.0)) as f64 * 1e-9 + 1.0);
-        // The robot moves after the second gesture: no third.
+        // The robot moves after the second gesture and stays where it went: no third.
+        let went = still + DVec3::new(0.12, 0.0, 0.04);
         assert_eq!(op.watch(second.end_ns(), &second, still), None);
         assert_eq!(op.watch(second.end_ns() + s(1.0), &second, still + DVec3::new(0.05, 0.0, 0.0)), None);
-        assert_eq!(op.watch(second.end_ns() + s(5.0), &second, still), None, "the robot reacted");
+        for t in [2.0, 5.0, 20.0, 60.0] {
+            assert_eq!(op.watch(second.end_ns() + s(t), &second, went), None, "the robot reacted ({t} s)");
+        }
         // Without repeats, never.
         let mut once = PointerOperator::of_scenario(&Scenario::parse(&text.replace("repeats = 2 ", "repeats = 0 "), std::path::Path::new("p.toml")).unwrap()).unwrap();
         assert_eq!(once.watch(end + s(10.0), &first, still), None);
+    }
+
+    #[test]
+    fn an_arm_that_settles_or_goes_away_and_comes_back_is_not_a_reaction() {
+        let text = include_str!("../../scenarios/point_clutter3.toml").replace("at_s = 80.0", "at_s = 1.0");
+        let scenario = Scenario::parse(&text, std::path::Path::new("p.toml")).unwrap();
+        let first = PointerGesture::of_scenario(&scenario).unwrap();
+        let s = |t: f64| s_to_ns(t);
+        let end = first.end_ns();
+        let parked = DVec3::new(0.18, 0.0, 0.14);
+        // A hold's stop and the parked arm's settling: a fraction of a millimetre.
+        let mut op = PointerOperator::of_scenario(&scenario).unwrap();
+        assert_eq!(op.watch(end, &first, parked), None);
+        assert_eq!(op.watch(end + s(1.0), &first, parked + DVec3::new(0.0004, 0.0, -0.0003)), None);
+        assert!(op.watch(end + s(4.0), &first, parked + DVec3::new(0.0002, 0.0, 0.0)).is_some(), "a settling arm did not react");
+        // The robot busies itself elsewhere (the cage visited again after a lost view) and
+        // comes back to where it waited: the operator waits while it moves, then, the arm
+        // standing still there, points again `repeat_after_s` after it came back.
+        let mut op = PointerOperator::of_scenario(&scenario).unwrap();
+        assert_eq!(op.watch(end, &first, parked), None);
+        assert_eq!(op.watch(end + s(1.0), &first, DVec3::new(0.27, -0.10, 0.06)), None);
+        assert_eq!(op.watch(end + s(6.0), &first, DVec3::new(0.45, 0.10, 0.20)), None, "still moving");
+        assert_eq!(op.watch(end + s(9.0), &first, parked), None, "just back");
+        let again = op.watch(end + s(13.0), &first, parked).expect("back where it waited and still: no reaction after all");
+        assert!(again.azimuth_deg != first.azimuth_deg);
     }
 
     #[test]

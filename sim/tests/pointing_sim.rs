@@ -105,7 +105,11 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
         while t(&sim) < hold_from - 0.2 {
             sim.step_frame();
         }
+        // As the daemon's point phase watches: a refusal does not end the watch while the
+        // hand holds (its window may settle into an answer); a hand unanswered by the end of
+        // the hold is refused with its newest refusal (one from a steady window first).
         let mut state = GestureState::Absent;
+        let mut refusal = None;
         while t(&sim) < hold_to {
             sim.step_frame();
             render(&sim, &mut gray);
@@ -113,9 +117,20 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
             let start = Instant::now();
             state = tracker.update(&l, &r);
             update_us.push(start.elapsed().as_secs_f64() * 1e6);
-            if matches!(state, GestureState::Indicated(_) | GestureState::Degenerate { .. } | GestureState::Unsteady { .. } | GestureState::NoLine { .. } | GestureState::Uncertain { .. }) {
-                break;
+            match state {
+                GestureState::Indicated(_) => break,
+                // One from a steady window stands over a later unsteady or no line.
+                GestureState::Degenerate { .. } | GestureState::Uncertain { .. } => refusal = Some(state),
+                GestureState::Unsteady { .. } | GestureState::NoLine { .. } => {
+                    if !matches!(refusal, Some(GestureState::Degenerate { .. } | GestureState::Uncertain { .. })) {
+                        refusal = Some(state);
+                    }
+                }
+                GestureState::Absent | GestureState::Moving { .. } => {}
             }
+        }
+        if let (false, Some(r)) = (matches!(state, GestureState::Indicated(_)), refusal) {
+            state = r;
         }
         if let Some(dir) = std::env::var_os("HANDEYE_POINTING_DEBUG") {
             // The last frame and the background as PGM, and why each view found no arm.
@@ -204,11 +219,12 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
         let o = &outcomes[(*seed - 1) as usize];
         assert!(matches!(o.state, GestureState::Absent), "seed {seed}: still {:?} at the end of the hold", o.state);
     }
-    // 18 of 30 answered with the arm parked out of the hand's way (17 with it at home in
-    // front of the hand; BENCHMARKS.md, Pointing): the refusals are the point of the design
-    // (never a guess; the operator points again), but fewer answers than this is a
-    // regression.
-    assert!(errors.len() >= 16, "only {} of {GESTURES} gestures gave a point", errors.len());
+    // 20 of 30 answered with the arm parked out of the hand's way and the watch going on
+    // after a refusal while the hand holds (18 when the first refusal ended it, 17 with the
+    // arm at home in front of the hand; BENCHMARKS.md, Pointing): the refusals are the point
+    // of the design (never a guess; the operator points again), but fewer answers than this
+    // is a regression.
+    assert!(errors.len() >= 19, "only {} of {GESTURES} gestures gave a point", errors.len());
     assert!(rank(0.5) <= 0.010, "median error {:.1} mm", rank(0.5) * 1e3);
     assert!(rank(0.9) <= 0.020, "90th percentile error {:.1} mm", rank(0.9) * 1e3);
     let wrong: Vec<u64> = outcomes.iter().filter(|o| o.picks_target == Some(false)).map(|o| o.seed).collect();

@@ -21,7 +21,8 @@ use crate::safety::{check_trackers, needs_trackers};
 /// by a shifted search, and an occluder crossing it has passed by then (they cross in 1-2 s).
 pub const TARGET_SEARCH_S: f64 = 4.0;
 /// Camera time a lost plate is searched for before the jaws open and close to locate it, s
-/// (a knocked camera's plate is found within 0.5 s; an occluder has passed within 2 s).
+/// (a knocked camera's plate is found within 0.5 s; an occluder has passed within 2 s), and
+/// counted from when the operator's hand was last seen while it points.
 pub const JAWS_AFTER_S: f64 = 3.0;
 /// A target displacement measured larger than this is not believed (the indicated point
 /// stays), m.
@@ -188,7 +189,11 @@ impl HardLoop {
     fn jaws_for_lost_plate(&mut self, c: &Cycle<'_>) -> Option<Cmd> {
         let rec = self.recovery.as_mut()?;
         if self.jaws.is_none() {
-            if self.jaws_tried || !rec.plate_missing() || !crate::phase::timed_out(rec.start_ns(), c.time_ns, JAWS_AFTER_S) {
+            // An operator's hand in view (the point phase) is what hides the plate, and it
+            // holds still for seconds: the jaws' motion waits until it has gone (their motion
+            // is found by differencing, which the hand's own motion would spoil).
+            let since_ns = rec.start_ns().max(self.mission.pointing.hand_seen_ns().unwrap_or(0));
+            if self.jaws_tried || !rec.plate_missing() || !crate::phase::timed_out(since_ns, c.time_ns, JAWS_AFTER_S) {
                 return None;
             }
             tracing::warn!(what = %rec.what(), "plate not found by search: opening and closing the jaws to locate it");
@@ -329,5 +334,28 @@ mod tests {
         assert!(hl.recovery.as_ref().is_some_and(|r| r.is_searching(Role::Target, View::Right)));
         assert_eq!(hl.refuse_blind_moves(go, Phase::Calibrate, &states), Cmd::HOLD);
         assert_eq!(hl.moves_refused(), 2);
+    }
+
+    #[test]
+    fn the_jaws_wait_for_the_operators_hand_to_go() {
+        // The parked plate lost in the point phase, behind the operator's hand (seeds 4 and 5
+        // of the pointing batch: the jaws moved while the hand held still, their motion was
+        // not found among the hand's, and the run stopped before the next gesture).
+        let (mut hl, _) = tracking_loop();
+        let blank = ImageBuf::filled(160, 120, 200);
+        let (l, r) = (blank.view(), blank.view());
+        let states = hl.mission.trackers.update(&l, &r, 0.03);
+        assert!(hl.start_hold(Phase::Point, 7, 0, &states));
+        assert!(hl.recovery.as_ref().is_some_and(|r| r.plate_missing()));
+        let robot = handeye_wire::RobotState::default();
+        let s = |t: f64| (t * 1e9) as u64;
+        let cycle = |t_ns: u64| Cycle { frame_index: t_ns / 33_333_333, time_ns: t_ns, frame_id: 0, robot: &robot, rejected_seq: None, seq: 1, left: &l, right: &r, states };
+        // The hand was seen until 2.5 s: 3.5 s into the hold the jaws still wait ...
+        hl.mission.pointing.hand_at(s(2.5), true);
+        assert_eq!(hl.jaws_for_lost_plate(&cycle(s(3.5))), None);
+        assert!(hl.jaws.is_none() && !hl.jaws_tried);
+        // ... and move once it has been gone JAWS_AFTER_S.
+        assert!(hl.jaws_for_lost_plate(&cycle(s(2.5 + JAWS_AFTER_S + 0.05))).is_some());
+        assert!(hl.jaws_tried);
     }
 }

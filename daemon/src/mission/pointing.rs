@@ -72,6 +72,8 @@ pub struct PointingRecord {
     plane_z_m: f64,
     plane_fit_rms_px: f64,
     changes: Vec<(u64, String)>,
+    /// Camera time of the newest result that saw a hand (any state but absent), ns.
+    hand_seen_ns: Option<u64>,
 }
 
 /// State changes kept for `daemon.json`.
@@ -104,6 +106,7 @@ impl Default for PointingRecord {
             plane_z_m: f64::NAN,
             plane_fit_rms_px: f64::NAN,
             changes: Vec::new(),
+            hand_seen_ns: None,
         }
     }
 }
@@ -131,6 +134,20 @@ impl PointingRecord {
         self.newest = Some(*r);
     }
 
+    /// The result taken at camera time `time_ns` saw a hand (or saw none).
+    pub fn hand_at(&mut self, time_ns: u64, present: bool) {
+        if present {
+            self.hand_seen_ns = Some(time_ns);
+        }
+    }
+
+    /// Camera time a hand was last seen while watching, ns (`None`: never, or the watch
+    /// ended). A hand in front of the parked plate explains its loss: the hold waits for it
+    /// to go before it tries anything else (`hard_loop/hold.rs`).
+    pub fn hand_seen_ns(&self) -> Option<u64> {
+        self.hand_seen_ns
+    }
+
     /// A gesture ended (answered or refused).
     pub fn gesture(&mut self, g: GestureRecord) {
         if g.outcome == "indicated" {
@@ -151,6 +168,7 @@ impl PointingRecord {
     pub fn stop(&mut self) {
         self.newest = None;
         self.this_cycle = None;
+        self.hand_seen_ns = None;
     }
 
     /// `daemon.json` `pointing` (`None`: the phase never watched).

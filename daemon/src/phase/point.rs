@@ -14,8 +14,10 @@
 //!
 //! An answer (`Indicated`) becomes the targeting's indicated point; the daemon waits for the
 //! hand to go (the planner must not see it), returns the arm to where the calibration left
-//! it, and goes on to plan. A refusal (degenerate, uncertain, unsteady, no line) is recorded
-//! with its numbers, and the daemon waits for the hand to go and for the next gesture.
+//! it, and goes on to plan. A refusal (degenerate, uncertain, unsteady, no line) does not end
+//! the watch of a hand that still holds: its window may settle into an answer (a window first
+//! uncertain, then steadier), which is taken. A hand that goes unanswered is recorded with its
+//! newest refusal and its numbers, and the daemon waits for the next gesture.
 //! `[point] timeout_s` ends the run naming every gesture seen. A hand that passes in front of
 //! the parked plate does not stop the watching: the arm holds while the plate is searched for
 //! ([`crate::recovery`]), and the frames meanwhile still go to the gesture tracker
@@ -49,9 +51,11 @@ enum Stage {
     Park { wait: Option<MoveWait> },
     /// Arm still for this many frames.
     Settle { still: u32 },
-    /// Watching for gestures; `refused`: the last gesture was refused and the hand is still
-    /// there (its further states are the same gesture's).
-    Watch { refused: bool },
+    /// Watching for gestures; `refusal`: the hand in view was refused so far (the newest
+    /// refusal, one from a steady window before any other), recorded when it goes. A hand that still holds may settle into an answer
+    /// (a window first uncertain, then steadier): its later states are the same gesture's,
+    /// and one that indicates is answered.
+    Watch { refusal: Option<Box<GestureRecord>> },
     /// Answered; waiting for the hand to go, since `since_ns`; `gone`: it went.
     Withdraw { since_ns: u64, gone: bool },
     /// Returning the arm to where the calibration left it.
@@ -90,6 +94,11 @@ pub fn plane_maps_from(cage_robot_m: &[Vector3<f64>], cage_image_px: &[[f64; 4]]
         PlaneHomography::fit(&plane, &view).map_err(|e| format!("plane map of the {} view: {e}", ["left", "right"][k]))
     };
     Ok((Pointing::new(fit(0)?, fit(1)?), z, cams.residual_rms_px))
+}
+
+/// A refusal that came from a steady window (the hand held still: uncertain, degenerate).
+fn steady_refusal(outcome: &str) -> bool {
+    matches!(outcome, "uncertain" | "degenerate")
 }
 
 /// Both plate trackers track on this frame.
@@ -186,34 +195,47 @@ impl PointPhase {
         let Some(r) = result else { return };
         m.pointing.result(&r);
         let absent = matches!(r.state, GestureState::Absent);
+        m.pointing.hand_at(time_ns, !absent);
         match &mut self.stage {
             Stage::Withdraw { gone, .. } => *gone = absent,
-            Stage::Watch { refused } if absent => {
-                if *refused {
+            Stage::Watch { refusal } if absent => {
+                // The hand has gone: a refusal it never made good is the gesture's outcome.
+                if let Some(g) = refusal.take() {
+                    m.pointing.gesture(*g);
                     m.reporting.set_status("point: gesture refused; waiting for the next one");
                 }
-                *refused = false;
             }
-            Stage::Watch { refused: true } => {} // the refused gesture's hand is still there
-            Stage::Watch { refused: false } => {
-                let Some(g) = record(&r, time_ns, self.plane_z_m) else {
-                    m.reporting.set_status("point: a hand in view");
+            Stage::Watch { refusal } => {
+                let Some(mut g) = record(&r, time_ns, self.plane_z_m) else {
+                    if refusal.is_none() {
+                        m.reporting.set_status("point: a hand in view");
+                    }
                     return;
                 };
-                tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
-                let answered = g.point_m;
-                m.pointing.gesture(g);
-                match answered {
+                match g.point_m {
                     Some(p) => {
+                        if let Some(first) = refusal.take() {
+                            g.detail = format!("{} (after {}: {} while the hand settled)", g.detail, first.outcome, first.detail);
+                        }
+                        tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
+                        m.pointing.gesture(g);
                         m.targeting.set_indicated_m(Some(p));
                         m.reporting.set_status("point: indicated; waiting for the hand to go");
                         m.reporting.snapshot("pointed");
                         self.stage = Stage::Withdraw { since_ns: time_ns, gone: false };
                     }
                     None => {
-                        m.reporting.set_status("point: gesture refused; waiting for the hand to go");
-                        m.reporting.snapshot("point_refused");
-                        self.stage = Stage::Watch { refused: true };
+                        if refusal.is_none() {
+                            tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture refused while the hand is there");
+                            m.reporting.set_status("point: gesture refused so far; watching it while the hand holds");
+                            m.reporting.snapshot("point_refused");
+                        }
+                        // The most telling refusal stands: one from a steady window
+                        // (uncertain, degenerate) over a later "unsteady" or "no line" of the
+                        // same hand.
+                        if refusal.as_ref().is_none_or(|old| steady_refusal(&g.outcome) >= steady_refusal(&old.outcome)) {
+                            *refusal = Some(Box::new(g));
+                        }
                     }
                 }
             }
@@ -262,6 +284,9 @@ impl PointPhase {
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
         if timed_out(self.start_ns, c.time_ns, m.cfg.point().timeout_s) {
+            if let Stage::Watch { refusal: Some(g) } = &mut self.stage {
+                m.pointing.gesture((**g).clone());
+            }
             return Step::fail(FailureKind::TimedOut, format!("point: no pointing gesture answered in {} s ({})", m.cfg.point().timeout_s, Self::seen(m)));
         }
         match self.stage {
@@ -291,7 +316,7 @@ impl PointPhase {
                 }
                 m.reporting.set_status("point: waiting for the operator to point");
                 m.reporting.snapshot("point_background");
-                self.stage = Stage::Watch { refused: false };
+                self.stage = Stage::Watch { refusal: None };
                 Step::Stay(Cmd::HOLD)
             }
             Stage::Watch { .. } => {

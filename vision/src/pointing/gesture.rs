@@ -21,7 +21,8 @@ pub struct GestureConfig {
     /// Frames the lines must hold still before a point is reported (10 at 30 Hz: 1/3 s).
     pub steady_frames: usize,
     /// Still: over those frames, the arm's silhouette (its centroid) moved no more than this
-    /// in either view, and the fingertip no more than three times this, pixels.
+    /// in either view, and its end at the fingertip (the silhouette's, not the fitted
+    /// line's: [`ArmAxis::end_px`]) no more than three times this, pixels.
     pub steady_px: f64,
     /// An arm in view this many frames without holding still is an unsteady hand, or one
     /// without a line (90 at 30 Hz: 3 s).
@@ -167,14 +168,17 @@ impl PointingTracker {
     }
 
     /// Every silhouette of the window within `steady_px` of the newest one (centroid), and
-    /// its fingertip within three times that.
+    /// its end at the fingertip within three times that. The silhouette, not the fitted line:
+    /// a hand held still whose fit turns between the finger's and the whole arm's midline
+    /// from frame to frame (the fitted tip then jumps several pixels across) is still; how far
+    /// those lines spread is the point's uncertainty (the window's jitter), not unsteadiness.
     fn steady(&self) -> bool {
         let newest = self.history[(self.next + self.history.len() - 1) % self.history.len()];
         self.history.iter().all(|h| {
             (0..2).all(|v| {
                 let (a, b) = (&h[v], &newest[v]);
                 let moved = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
-                moved(a.centroid_px, b.centroid_px) <= self.config.steady_px && moved(a.tip_px, b.tip_px) <= 3.0 * self.config.steady_px
+                moved(a.centroid_px, b.centroid_px) <= self.config.steady_px && moved(a.end_px, b.end_px) <= 3.0 * self.config.steady_px
             })
         })
     }
@@ -188,13 +192,20 @@ impl PointingTracker {
             Err(_) => return GestureState::Degenerate { crossing_rad: 0.0 },
         };
         // Uncertainty: each view's line turned by its angle error about its centre, and
-        // shifted by its offset error (fit) or its jitter over the window (whichever is
-        // larger), carried through the intersection; the four effects add in quadrature.
+        // shifted by its offset error, carried through the intersection; the four effects
+        // add in quadrature. Each error is the fit's own or the window's jitter, whichever is
+        // larger: the frames' lines scattered about the mean line in offset (at the centre)
+        // and in angle. The angle's jitter matters where the fit turns between the finger's
+        // midline and the whole arm's from frame to frame (a finger over the robot or cut by
+        // the border): the centres stay put, the lines fan out, and the mean line is no
+        // surer than that fan.
         let mut var = 0.0;
+        let count = self.history.len() as f64;
         for v in 0..2 {
-            let jitter = self.history.iter().map(|h| distance(&axes[v].line, &h[v].centre_px).powi(2)).sum::<f64>() / self.history.len() as f64;
+            let jitter = self.history.iter().map(|h| distance(&axes[v].line, &h[v].centre_px).powi(2)).sum::<f64>() / count;
+            let turn_jitter = self.history.iter().map(|h| angle_between(&axes[v].line, &h[v].line).powi(2)).sum::<f64>() / count;
             let shift = axes[v].offset_sigma_px.max(jitter.sqrt()).max(0.1);
-            let turn = axes[v].angle_sigma_rad.max(1e-4);
+            let turn = axes[v].angle_sigma_rad.max(turn_jitter.sqrt()).max(1e-4);
             for (dturn, dshift) in [(turn, 0.0), (0.0, shift)] {
                 let moved = perturbed(&axes[v], dturn, dshift);
                 let lines = if v == 0 { (moved, axes[1].line) } else { (axes[0].line, moved) };
@@ -233,10 +244,17 @@ fn distance(l: &ImageLine, p: &[f64; 2]) -> f64 {
     (l.0[0] * p[0] + l.0[1] * p[1] + l.0[2]).abs()
 }
 
+/// The angle between two lines' directions (sign ignored), radians.
+fn angle_between(a: &ImageLine, b: &ImageLine) -> f64 {
+    let (na, nb) = (Vector2::new(a.0[0], a.0[1]), Vector2::new(b.0[0], b.0[1]));
+    let cross = na[0] * nb[1] - na[1] * nb[0];
+    cross.abs().atan2(na.dot(&nb).abs())
+}
+
 /// The axes' mean: the mean direction (signs aligned) through the mean centre.
 fn mean_axis<'a>(axes: impl Iterator<Item = &'a ArmAxis>) -> ArmAxis {
     let mut first: Option<ArmAxis> = None;
-    let (mut n, mut dir, mut centre, mut tip, mut tail) = (0.0, Vector2::zeros(), Vector2::zeros(), Vector2::zeros(), Vector2::zeros());
+    let (mut n, mut dir, mut centre, mut tip, mut tail, mut end) = (0.0, Vector2::zeros(), Vector2::zeros(), Vector2::zeros(), Vector2::zeros(), Vector2::zeros());
     for a in axes {
         let d = Vector2::new(a.tip_px[0] - a.tail_px[0], a.tip_px[1] - a.tail_px[1]);
         let along = Vector2::new(-a.line.0[1], a.line.0[0]);
@@ -244,6 +262,7 @@ fn mean_axis<'a>(axes: impl Iterator<Item = &'a ArmAxis>) -> ArmAxis {
         centre += Vector2::from(a.centre_px);
         tip += Vector2::from(a.tip_px);
         tail += Vector2::from(a.tail_px);
+        end += Vector2::from(a.end_px);
         n += 1.0;
         first.get_or_insert(*a);
     }
@@ -255,6 +274,7 @@ fn mean_axis<'a>(axes: impl Iterator<Item = &'a ArmAxis>) -> ArmAxis {
     out.centre_px = centre_px;
     out.tip_px = [tip[0] / n, tip[1] / n];
     out.tail_px = [tail[0] / n, tail[1] / n];
+    out.end_px = [end[0] / n, end[1] / n];
     out
 }
 

@@ -53,6 +53,11 @@ pub struct ArmAxis {
     pub centre_px: [f64; 2],
     /// Centroid of the changed pixels (how the whole arm moves), pixels.
     pub centroid_px: [f64; 2],
+    /// The silhouette's own end at the tip: the mean of its changed pixels within 2 px of its
+    /// extreme along the axis, pixels. Unlike `tip_px` (on the fitted line), it does not move
+    /// when the fit changes its mind between the finger's and the whole arm's midline from
+    /// one frame to the next: it says whether the hand moved.
+    pub end_px: [f64; 2],
     /// Changed pixels in the silhouette.
     pub pixels: usize,
     /// Cross-sections used in the final fit.
@@ -172,7 +177,9 @@ impl SilhouetteFinder {
             (true, None, _) => (fit.s_min, fit.s_max),
             (false, _, None) => (fit.s_max, fit.s_min),
         };
+        let end_px = self.extreme_px([cx, cy], [ex, ey], tip_at_start);
         Ok(ArmAxis {
+            end_px,
             line,
             tip_px: to_image(s_tip, fit.at(s_tip)),
             tail_px: to_image(s_tail, fit.at(s_tail)),
@@ -183,6 +190,21 @@ impl SilhouetteFinder {
             angle_sigma_rad: fit.b_sigma,
             offset_sigma_px: fit.a_sigma,
         })
+    }
+
+    /// The mean of the changed pixels within 2 px of the silhouette's extreme along `e`
+    /// (unit) through `c`: at its lowest end along `e` when `at_start`, else its highest.
+    fn extreme_px(&self, c: [f64; 2], e: [f64; 2], at_start: bool) -> [f64; 2] {
+        let sign = if at_start { -1.0 } else { 1.0 };
+        let along = |&(x, y): &(u16, u16)| sign * ((f64::from(x) - c[0]) * e[0] + (f64::from(y) - c[1]) * e[1]);
+        let far = self.pixels.iter().map(along).fold(f64::NEG_INFINITY, f64::max);
+        let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0.0f64);
+        for p in self.pixels.iter().filter(|p| along(p) >= far - 2.0) {
+            sx += f64::from(p.0);
+            sy += f64::from(p.1);
+            n += 1.0;
+        }
+        [sx / n.max(1.0), sy / n.max(1.0)]
     }
 
     /// Cross-sections of the silhouette perpendicular to direction `e` (unit) through `c`,
