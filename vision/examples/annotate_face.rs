@@ -14,7 +14,9 @@
 //! systematic part of about half a pixel.
 //!
 //! Writes one overlay PNG per frame (4x crop: hand estimate blue, edge points green, dropped
-//! points red, fitted face yellow) to check by eye, and prints the Rust constant.
+//! points red, fitted face yellow; with `ANNOTATE_COMPARE=FILE`, a tracker's left face from
+//! `tracker_profile`'s per-frame output in magenta) to check by eye, and prints the Rust
+//! constant.
 //!
 //! ```text
 //! cargo run --release -p handeye-vision --example annotate_face -- [DIR [OVERLAY_DIR]]
@@ -265,6 +267,19 @@ fn main() {
         }
         for c in 0..4 {
             draw_line(&mut out, origin, corners[c], corners[(c + 1) % 4], Rgb([255, 230, 0]));
+        }
+        // `ANNOTATE_COMPARE=FILE`: a tracker's corners (`tracker_profile`'s third argument's
+        // output) drawn in magenta, to see where a run was on the face.
+        if let Ok(path) = std::env::var("ANNOTATE_COMPARE") {
+            let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+            let prefix = format!("left {frame} ");
+            if let Some(line) = text.lines().find(|l| l.starts_with(&prefix)) {
+                let v: Vec<f64> = line.split(' ').skip(4).map(|x| x.parse().expect("ANNOTATE_COMPARE corners")).collect();
+                for c in 0..4 {
+                    let (a, b) = ([v[2 * c], v[2 * c + 1]], [v[2 * ((c + 1) % 4)], v[2 * ((c + 1) % 4) + 1]]);
+                    draw_line(&mut out, origin, a, b, Rgb([255, 0, 255]));
+                }
+            }
         }
         let file = overlays.join(format!("left-face-{frame:03}.png"));
         out.save(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));

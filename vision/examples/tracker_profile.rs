@@ -90,6 +90,12 @@ fn main() {
     }
     let dt_s = 1.0 / 30.0;
 
+    // TRACKER_TRACE="top|left,dx,dy,scale": one run frame by frame (corner error on the
+    // annotated frames, the wrong-lock check's streak), with the points and margin set above.
+    if let Ok(trace) = std::env::var("TRACKER_TRACE") {
+        trace_run(&frames, config, &trace);
+        return;
+    }
     if let Some(grid) = std::env::var_os("TRACKER_GRID") {
         if grid == "wide" {
             wide_grid(&frames, config);
@@ -396,10 +402,6 @@ fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
             inits.push((dx, dy, scale));
         }
     }
-    let place = |face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64| -> Vec<[f64; 2]> {
-        let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
-        face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
-    };
     let mut summary = GridSummary { runs: inits.len(), ..GridSummary::default() };
     let (_, top_reference) = track_run(frames, config, &place(&TOP, 0.0, 0.0, 1.0), &[], &[]);
     let (_, left_reference) = track_run(frames, config, &place(&LEFT, 0.0, 0.0, 1.0), &[], &[]);
@@ -429,4 +431,34 @@ fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
         summary.verdicts.push(format!("{dx},{dy},{scale} top {} | left {}", top.text(), left.text()));
     }
     summary
+}
+
+/// Places `face` `dx, dy` px off and scaled by `scale` about its centre.
+fn place(face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64) -> Vec<[f64; 2]> {
+    let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
+    face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
+}
+
+/// `TRACKER_TRACE`: one run, a line per frame with a rival streak or an annotation.
+fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
+    let parts: Vec<&str> = spec.split(',').collect();
+    let [face, dx, dy, scale] = parts[..] else { panic!("TRACKER_TRACE: face,dx,dy,scale") };
+    let num = |s: &str| s.parse::<f64>().expect("TRACKER_TRACE: a number");
+    let (corners, truth): (&[[f64; 2]; 4], &Truth) = if face == "top" { (&TOP, &TRUTH) } else { (&LEFT, &LEFT_FACE_TRUTH) };
+    let mut tracker = ContourTracker::new(config, &place(corners, num(dx), num(dy), num(scale))).unwrap();
+    for (k, frame) in frames.iter().enumerate() {
+        let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { 1.0 / 30.0 });
+        let (streak, side, offset, turn) = tracker.rival_streak();
+        let err = truth.iter().find(|(f, _)| *f == k).map(|(_, t)| {
+            let errs: Vec<String> = tracker.corners().zip(t).map(|(c, t)| format!("{:.1}", (c - Vector2::new(t[0], t[1])).norm())).collect();
+            format!(" errors {}", errs.join(" "))
+        });
+        if streak > 0 || err.is_some() || !state.is_tracking() {
+            println!("{k} {} rival streak {streak} side {side} offset {offset:+.0} turn {turn:+.0}{}", state.code(), err.unwrap_or_default());
+        }
+        if !state.is_tracking() {
+            println!("{:?}", state.lost_reason());
+            break;
+        }
+    }
 }
