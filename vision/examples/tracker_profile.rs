@@ -12,6 +12,19 @@
 //! ```
 //!
 //! `DIR` defaults to `$HANDEYE_DATA/visp-cube` (README.md, "Test data").
+//!
+//! Robustness (issue 18 item 5): `TRACKER_GRID=wide` tracks the top and left faces from 495
+//! perturbed starts each and counts per face the runs that pass through a *wrong lock* (>= 6
+//! px off the annotated corners on an annotated frame while `tracking`) and the runs lost;
+//! `TRACKER_VERDICTS=FILE` writes a line per run, `TRACKER_BASELINE=FILE` (another build's
+//! verdicts) lists the runs that build tracked to the end and this one reports lost, and
+//! `TRACKER_TRACE=top|left,dx,dy,scale` prints one run frame by frame. `TRACKER_<FIELD>`
+//! overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
+//!
+//! ```text
+//! TRACKER_GRID=wide TRACKER_VERDICTS=/tmp/after.txt TRACKER_BASELINE=/tmp/before.txt \
+//!     cargo run --release -p handeye-vision --example tracker_profile
+//! ```
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -454,7 +467,13 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
             format!(" errors {}", errs.join(" "))
         });
         if streak > 0 || err.is_some() || !state.is_tracking() {
-            println!("{k} {} rival streak {streak} side {side} offset {offset:+.0} turn {turn:+.0}{}", state.code(), err.unwrap_or_default());
+            let corners: Vec<String> = tracker.corners().map(|c| format!("{:.1} {:.1}", c.x, c.y)).collect();
+            println!(
+                "{k} {} rival streak {streak} side {side} offset {offset:+.0} turn {turn:+.0}{} corners {}",
+                state.code(),
+                err.unwrap_or_default(),
+                corners.join(" ")
+            );
         }
         if !state.is_tracking() {
             println!("{:?}", state.lost_reason());
