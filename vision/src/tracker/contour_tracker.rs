@@ -353,6 +353,11 @@ impl ContourTracker {
             &self.fitted_px,
             band_px,
             self.config.min_rival_offset_px,
+            self.config.rival_margin_points,
+            // Turned lines cost ~8 more histograms a side: on a track with no rival in its
+            // count, every other update is enough to see one appear (a wrong lock lasts);
+            // once counting, every update.
+            self.rival_updates > 0 || self.updates % 2 == 0,
         );
         // A rival counts when it outnumbers the side by the margin and holds most of the
         // side's points: a face's edge of low contrast (a crease between two faces of the
