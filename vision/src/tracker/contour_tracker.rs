@@ -357,7 +357,7 @@ impl ContourTracker {
             // Turned lines cost ~8 more histograms a side: on a track with no rival in its
             // count, every other update is enough to see one appear (a wrong lock lasts);
             // once counting, every update.
-            self.rival_updates > 0 || self.updates % 2 == 0,
+            self.rival_updates > 0 || self.updates.is_multiple_of(2),
         );
         // A rival counts when it outnumbers the side by the margin and holds most of the
         // side's points: a face's edge of low contrast (a crease between two faces of the
