@@ -12,6 +12,19 @@
 //! ```
 //!
 //! `DIR` defaults to `$HANDEYE_DATA/visp-cube` (README.md, "Test data").
+//!
+//! Robustness (issue 18 item 5): `TRACKER_GRID=wide` tracks the top and left faces from 495
+//! perturbed starts each and counts per face the runs that pass through a *wrong lock* (>= 6
+//! px off the annotated corners on an annotated frame while `tracking`) and the runs lost;
+//! `TRACKER_VERDICTS=FILE` writes a line per run, `TRACKER_BASELINE=FILE` (another build's
+//! verdicts) lists the runs that build tracked to the end and this one reports lost, and
+//! `TRACKER_TRACE=top|left,dx,dy,scale` prints one run frame by frame. `TRACKER_<FIELD>`
+//! overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
+//!
+//! ```text
+//! TRACKER_GRID=wide TRACKER_VERDICTS=/tmp/after.txt TRACKER_BASELINE=/tmp/before.txt \
+//!     cargo run --release -p handeye-vision --example tracker_profile
+//! ```
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -24,7 +37,10 @@ use nalgebra::Vector2;
 mod data_support;
 #[path = "../tests/visp_cube_truth/mod.rs"]
 mod visp_cube_truth;
-use visp_cube_truth::{GROUND_TRUTH as TRUTH, TOP_FACE_FRAME0 as TOP};
+use visp_cube_truth::{GROUND_TRUTH as TRUTH, LEFT_FACE_TRUTH, TOP_FACE_FRAME0 as TOP};
+
+/// Annotated corners of one face, per frame.
+type Truth = [(usize, [[f64; 2]; 4])];
 
 const LEFT: [[f64; 2]; 4] = [[315.0, 234.0], [365.0, 291.0], [361.0, 350.0], [317.0, 289.0]];
 
@@ -87,6 +103,12 @@ fn main() {
     }
     let dt_s = 1.0 / 30.0;
 
+    // TRACKER_TRACE="top|left,dx,dy,scale": one run frame by frame (corner error on the
+    // annotated frames, the wrong-lock check's streak), with the points and margin set above.
+    if let Ok(trace) = std::env::var("TRACKER_TRACE") {
+        trace_run(&frames, config, &trace);
+        return;
+    }
     if let Some(grid) = std::env::var_os("TRACKER_GRID") {
         if grid == "wide" {
             wide_grid(&frames, config);
@@ -194,6 +216,10 @@ struct GridSummary {
     top_wrong_lock: usize,
     /// Top face lost without having passed through a wrong lock first.
     top_lost_clean: usize,
+    /// The left face's wrong locks (>= 6 px off its annotations while tracking) and losses
+    /// without one, counted as the top face's.
+    left_wrong_lock: usize,
+    left_lost_clean: usize,
     /// Runs that strayed >= 6 px from the reference track (the face tracked from the
     /// annotated start with the same settings) on some frame after frame 5 while tracking:
     /// wrong locks between the annotated frames, and on the left face, which has no
@@ -205,6 +231,14 @@ struct GridSummary {
 }
 
 impl GridSummary {
+    /// Per face: wrong locks, lost, lost without a wrong lock first.
+    fn faces_line(&self) -> String {
+        format!(
+            "top: wrong locks {}, lost {} ({} without a wrong lock); left: wrong locks {}, lost {} ({} without a wrong lock)",
+            self.top_wrong_lock, self.top_lost, self.top_lost_clean, self.left_wrong_lock, self.left_lost, self.left_lost_clean
+        )
+    }
+
     fn line(&self) -> String {
         let mut worsts = self.worsts.clone();
         worsts.sort_by(f64::total_cmp);
@@ -232,8 +266,10 @@ struct RunVerdict {
     /// `None`: tracked to the last frame; else the frame it was reported lost at and the
     /// reason's code.
     lost: Option<(usize, &'static str)>,
-    /// Worst error on the annotated frames after 0 while tracking (top face only, else 0).
+    /// Worst error on the annotated frames after 0 while tracking.
     worst_px: f64,
+    /// The annotated frame of that worst error.
+    worst_frame: usize,
     /// Frames on which the face was tracked >= 6 px (worst corner) from the reference track
     /// (the same face and settings tracked from the annotated start), and the first of them
     /// after frame 5 (the start's snap onto the edges takes a few frames).
@@ -247,7 +283,7 @@ impl RunVerdict {
     /// E.g. `tracked 2.31 off 0` or `lost@123:wrong_lock 2.10 off 4 from 95 last 7.2`;
     /// `WRONG` marks a wrong lock on the annotated frames.
     fn text(&self) -> String {
-        let wrong = if self.worst_px >= 6.0 { " WRONG" } else { "" };
+        let wrong = if self.worst_px >= 6.0 { format!(" WRONG@{}", self.worst_frame) } else { String::new() };
         let state = match self.lost {
             None => "tracked".to_string(),
             Some((frame, reason)) => format!("lost@{frame}:{reason}"),
@@ -261,19 +297,19 @@ impl RunVerdict {
 }
 
 /// Tracks one face through every frame from `start`: lost or tracked, the worst error on the
-/// annotated frames after 0 while it reported `tracking` (when `truth` is given), and how far
+/// annotated frames after 0 while it reported `tracking` (against `truth`), and how far
 /// it strayed from `reference` (the corners of a reference run, frame by frame). Returns the
 /// verdict and this run's corners on the frames it tracked.
 fn track_run(
     frames: &[ImageBuf],
     config: TrackerConfig,
     start: &[[f64; 2]],
-    truth: bool,
+    truth: &Truth,
     reference: &[Vec<Vector2<f64>>],
 ) -> (RunVerdict, Vec<Vec<Vector2<f64>>>) {
     let dt_s = 1.0 / 30.0;
     let mut tracker = ContourTracker::new(config, start).unwrap();
-    let mut verdict = RunVerdict { lost: None, worst_px: 0.0, off_reference: 0, first_off: None, last_from_reference_px: 0.0 };
+    let mut verdict = RunVerdict { lost: None, worst_px: 0.0, worst_frame: 0, off_reference: 0, first_off: None, last_from_reference_px: 0.0 };
     let mut track = Vec::with_capacity(frames.len());
     for (k, frame) in frames.iter().enumerate() {
         let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { dt_s });
@@ -292,9 +328,12 @@ fn track_run(
                 }
             }
         }
-        if truth && let Some((_, annotated)) = TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
+        if let Some((_, annotated)) = truth.iter().find(|(f, _)| *f == k && *f > 0) {
             for (c, t) in corners.iter().zip(annotated) {
-                verdict.worst_px = verdict.worst_px.max((c - Vector2::new(t[0], t[1])).norm());
+                let err = (c - Vector2::new(t[0], t[1])).norm();
+                if err > verdict.worst_px {
+                    (verdict.worst_px, verdict.worst_frame) = (err, k);
+                }
             }
         }
         track.push(corners);
@@ -315,6 +354,8 @@ fn wide_grid(frames: &[ImageBuf], config: TrackerConfig) {
             total.top_wrong += summary.top_wrong;
             total.top_wrong_lock += summary.top_wrong_lock;
             total.top_lost_clean += summary.top_lost_clean;
+            total.left_wrong_lock += summary.left_wrong_lock;
+            total.left_lost_clean += summary.left_lost_clean;
             total.top_off_reference += summary.top_off_reference;
             total.left_off_reference += summary.left_off_reference;
             total.verdicts.extend(summary.verdicts.iter().map(|v| format!("{points}/{corner_margin}/{v}")));
@@ -324,6 +365,34 @@ fn wide_grid(frames: &[ImageBuf], config: TrackerConfig) {
         }
     }
     println!("wide {}", total.line().split("; failed").next().unwrap_or(""));
+    println!("wide per face: {}", total.faces_line());
+    // TRACKER_BASELINE=FILE: another build's TRACKER_VERDICTS; counts the runs that build
+    // tracked to the end and this one reports lost, per face.
+    if let Some(path) = std::env::var_os("TRACKER_BASELINE") {
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.to_string_lossy()));
+        let (mut top, mut left, mut runs) = (Vec::new(), Vec::new(), 0);
+        for (before, now) in text.lines().zip(&total.verdicts) {
+            let (key, key_now) = (before.split(' ').next(), now.split(' ').next());
+            assert_eq!(key, key_now, "{}: runs in another order", path.to_string_lossy());
+            let tracked = |line: &str, face: usize| line.split(" | ").nth(face).is_some_and(|v| v.contains(" tracked "));
+            let lost = |line: &str, face: usize| line.split(" | ").nth(face).is_some_and(|v| v.contains(" lost@"));
+            if tracked(before, 0) && lost(now, 0) {
+                top.push(key.unwrap_or(""));
+            }
+            if tracked(before, 1) && lost(now, 1) {
+                left.push(key.unwrap_or(""));
+            }
+            runs += 1;
+        }
+        println!(
+            "against {} ({runs} runs): tracked to the end there and lost now: top {} {:?}, left {} {:?}",
+            path.to_string_lossy(),
+            top.len(),
+            top,
+            left.len(),
+            left
+        );
+    }
     // TRACKER_VERDICTS=FILE: one line per run (`points/margin/dx,dy,scale top ... | left ...`),
     // to compare two builds run by run (`diff`).
     if let Some(path) = std::env::var_os("TRACKER_VERDICTS") {
@@ -346,15 +415,11 @@ fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
             inits.push((dx, dy, scale));
         }
     }
-    let place = |face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64| -> Vec<[f64; 2]> {
-        let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
-        face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
-    };
     let mut summary = GridSummary { runs: inits.len(), ..GridSummary::default() };
-    let (_, top_reference) = track_run(frames, config, &place(&TOP, 0.0, 0.0, 1.0), false, &[]);
-    let (_, left_reference) = track_run(frames, config, &place(&LEFT, 0.0, 0.0, 1.0), false, &[]);
+    let (_, top_reference) = track_run(frames, config, &place(&TOP, 0.0, 0.0, 1.0), &[], &[]);
+    let (_, left_reference) = track_run(frames, config, &place(&LEFT, 0.0, 0.0, 1.0), &[], &[]);
     for &(dx, dy, scale) in &inits {
-        let (top, _) = track_run(frames, config, &place(&TOP, dx, dy, scale), true, &top_reference);
+        let (top, _) = track_run(frames, config, &place(&TOP, dx, dy, scale), &TRUTH, &top_reference);
         let worst = top.worst_px;
         let wrong_lock = worst >= 6.0;
         summary.top_wrong_lock += usize::from(wrong_lock);
@@ -370,10 +435,49 @@ fn robustness_grid(frames: &[ImageBuf], config: TrackerConfig) -> GridSummary {
             }
             summary.top_wrong += usize::from(wrong_lock);
         }
-        let (left, _) = track_run(frames, config, &place(&LEFT, dx, dy, scale), false, &left_reference);
+        let (left, _) = track_run(frames, config, &place(&LEFT, dx, dy, scale), &LEFT_FACE_TRUTH, &left_reference);
+        let left_wrong = left.worst_px >= 6.0;
+        summary.left_wrong_lock += usize::from(left_wrong);
         summary.left_lost += usize::from(left.lost.is_some());
+        summary.left_lost_clean += usize::from(left.lost.is_some() && !left_wrong);
         summary.left_off_reference += usize::from(left.first_off.is_some());
         summary.verdicts.push(format!("{dx},{dy},{scale} top {} | left {}", top.text(), left.text()));
     }
     summary
+}
+
+/// Places `face` `dx, dy` px off and scaled by `scale` about its centre.
+fn place(face: &[[f64; 2]; 4], dx: f64, dy: f64, scale: f64) -> Vec<[f64; 2]> {
+    let c = face.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / 4.0, a[1] + p[1] / 4.0]);
+    face.iter().map(|p| [c[0] + (p[0] - c[0]) * scale + dx, c[1] + (p[1] - c[1]) * scale + dy]).collect()
+}
+
+/// `TRACKER_TRACE`: one run, a line per frame with a rival streak or an annotation.
+fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
+    let parts: Vec<&str> = spec.split(',').collect();
+    let [face, dx, dy, scale] = parts[..] else { panic!("TRACKER_TRACE: face,dx,dy,scale") };
+    let num = |s: &str| s.parse::<f64>().expect("TRACKER_TRACE: a number");
+    let (corners, truth): (&[[f64; 2]; 4], &Truth) = if face == "top" { (&TOP, &TRUTH) } else { (&LEFT, &LEFT_FACE_TRUTH) };
+    let mut tracker = ContourTracker::new(config, &place(corners, num(dx), num(dy), num(scale))).unwrap();
+    for (k, frame) in frames.iter().enumerate() {
+        let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { 1.0 / 30.0 });
+        let (streak, side, offset, turn) = tracker.rival_streak();
+        let err = truth.iter().find(|(f, _)| *f == k).map(|(_, t)| {
+            let errs: Vec<String> = tracker.corners().zip(t).map(|(c, t)| format!("{:.1}", (c - Vector2::new(t[0], t[1])).norm())).collect();
+            format!(" errors {}", errs.join(" "))
+        });
+        if streak > 0 || err.is_some() || !state.is_tracking() {
+            let corners: Vec<String> = tracker.corners().map(|c| format!("{:.1} {:.1}", c.x, c.y)).collect();
+            println!(
+                "{k} {} rival streak {streak} side {side} offset {offset:+.0} turn {turn:+.0}{} corners {}",
+                state.code(),
+                err.unwrap_or_default(),
+                corners.join(" ")
+            );
+        }
+        if !state.is_tracking() {
+            println!("{:?}", state.lost_reason());
+            break;
+        }
+    }
 }

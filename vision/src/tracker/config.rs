@@ -106,7 +106,8 @@ pub struct TrackerConfig {
     /// Lost when the inliers' RMS residual exceeds this, px.
     pub max_residual_px: f64,
     /// Wrong-lock check (`tracker::wrong_lock`, after each wide pass): a *rival* is a line
-    /// parallel to a side, at least `min_rival_offset_px` from it, on which at least this many
+    /// parallel to a side or turned up to 20 px over its length, reaching at least
+    /// `min_rival_offset_px` from it at one end, on which at least this many
     /// more of the side's points found an edge (within `inlier_px / 2`) than on the side as
     /// fitted, and more than half of them. With ~25 points a side, 3 is more than the one or
     /// two points a side's count moves by from update to update on a steady track.
@@ -117,10 +118,15 @@ pub struct TrackerConfig {
     /// is such a pair, 3 px apart), which the inlier band already covers. The wrong locks on
     /// the real sequence sit 6-11 px from the face's edge.
     pub min_rival_offset_px: f64,
-    /// Lost (`wrong_lock`) after this many updates in a row with a rival (0: never check).
-    /// On the face's true outline the wide pass pulls a side onto the edge most of its points
-    /// see within a few updates (a start 3-5 px off snaps in 1-4); a third of a second at
-    /// 30 frames/s is past that, and short of what a servo step acts on. The check needs the
+    /// Lost (`wrong_lock`) when the updates with a rival outnumber those without by this many
+    /// since the last time they did not (a count that rises by one on an update with a rival
+    /// and falls by one, not below 0, on one without; 0: never check). On the face's true
+    /// outline the wide pass pulls a side onto the edge most of its points see within a few
+    /// updates (a start 3-5 px off snaps in 1-4); a third of a second at 30 frames/s is past
+    /// that, and short of what a servo step acts on. Not "in a row": a wrong lock's rival
+    /// drops out of the wide pass for 1-3 updates now and then (the left face sheared 13 px off
+    /// its far bottom corner on the real sequence: rival on 47 of the first 58 updates, never
+    /// 10 in a row), and a reset each time let such locks run the whole sequence. The check needs the
     /// wide pass over every point: with `coarse_stride` > 1, or when `short_first_px` skips
     /// the wide pass, the count does not advance.
     pub max_rival_updates: usize,

@@ -100,7 +100,8 @@ pub struct ContourTracker {
     fitted_px: Vec<f64>,
     /// The strongest rival edge the first pass of the last update saw.
     rival: super::wrong_lock::Rival,
-    /// Updates in a row whose wide pass saw a rival edge outnumber its side's.
+    /// Updates whose wide pass saw a rival edge outnumber its side's, less those that did not
+    /// (never below 0; see `TrackerConfig::max_rival_updates`).
     rival_updates: usize,
 }
 
@@ -352,13 +353,18 @@ impl ContourTracker {
             &self.fitted_px,
             band_px,
             self.config.min_rival_offset_px,
+            self.config.rival_margin_points,
+            // Turned lines cost ~8 more histograms a side: on a track with no rival in its
+            // count, every other update is enough to see one appear (a wrong lock lasts);
+            // once counting, every update.
+            self.rival_updates > 0 || self.updates.is_multiple_of(2),
         );
         // A rival counts when it outnumbers the side by the margin and holds most of the
         // side's points: a face's edge of low contrast (a crease between two faces of the
         // same grey) that only some of its points see is no evidence against it.
         let r = &self.rival;
         let outnumbered = r.rival >= r.support + self.config.rival_margin_points && 2 * r.rival > r.count;
-        self.rival_updates = if outnumbered { self.rival_updates + 1 } else { 0 };
+        self.rival_updates = if outnumbered { self.rival_updates + 1 } else { self.rival_updates.saturating_sub(1) };
     }
 
     /// Places the points for `placement` and searches their normals: every point, or with
@@ -531,6 +537,7 @@ impl ContourTracker {
             return Some(LostReason::WrongLock {
                 side: r.side,
                 offset_px: r.offset_px,
+                turn_px: r.turn_px,
                 support: r.support,
                 rival: r.rival,
                 updates: self.rival_updates,
@@ -640,6 +647,14 @@ impl ContourTracker {
     /// Updates run since (re-)initialisation, including the one that lost the contour.
     pub fn update_count(&self) -> u64 {
         self.updates
+    }
+
+    /// Wide passes (less those without; see `TrackerConfig::max_rival_updates`) whose
+    /// wrong-lock check saw a side outnumbered by a rival edge
+    /// (`tracker::wrong_lock`; lost at `max_rival_updates`), and that rival's side, offset at
+    /// the side's middle and turn, px: how close a tracker is to reporting a wrong lock.
+    pub fn rival_streak(&self) -> (usize, usize, f64, f64) {
+        (self.rival_updates, self.rival.side, self.rival.offset_px, self.rival.turn_px)
     }
 
     /// The current affine frame (the last good one once lost). With the projective model it

@@ -19,8 +19,9 @@
 //! 5. **Judge**: share of points with an edge, share of inliers and whether they pin the
 //!    contour down in every direction, a sudden collapse of that share, the inlier residual,
 //!    frame degeneracy, leaving the image, and a wrong lock (`wrong_lock`: after each wide
-//!    pass, a side whose own points see a parallel edge 5 px or more away more often than the
-//!    edge the fit put it on, for 10 updates in a row). Failing any is the *lost* state with
+//!    pass, a side whose own points see another straight edge, parallel or turned, 5 px or
+//!    more away at an end more often than the edge the fit put it on, on 10 more updates than
+//!    not). Failing any is the *lost* state with
 //!    its [`LostReason`]; the servo must stop on it. Otherwise the points' polarity, contrast
 //!    and inside grey level are learnt.
 //!

@@ -27,13 +27,15 @@ pub enum LostReason {
     FlippedBasis,
     /// A computation produced a non-finite number.
     NotFinite,
-    /// Wrong lock: on `updates` wide passes in a row, `side` (corner `side` to `side + 1`)
-    /// sat on an edge `support` of its points found while a parallel edge `offset_px` away
-    /// (outward positive) was found by `rival` of them, at least
+    /// Wrong lock: on `updates` more wide passes than not (since the last time there were
+    /// none), `side` (corner `side` to `side + 1`)
+    /// sat on an edge `support` of its points found while another straight edge `offset_px`
+    /// away at the side's middle (outward positive), `turn_px` further out at the side's end
+    /// than at its start (0: parallel), was found by `rival` of them, at least
     /// [`rival_margin_points`](super::TrackerConfig::rival_margin_points) more and most of
     /// the side's points: the side slid
     /// onto a texture or neighbouring edge and the face's own edge is beside it.
-    WrongLock { side: usize, offset_px: f64, support: usize, rival: usize, updates: usize },
+    WrongLock { side: usize, offset_px: f64, turn_px: f64, support: usize, rival: usize, updates: usize },
 }
 
 impl LostReason {
@@ -83,11 +85,15 @@ impl fmt::Display for LostReason {
             }
             LostReason::FlippedBasis => write!(f, "frame flipped over"),
             LostReason::NotFinite => write!(f, "non-finite numbers in the fit"),
-            LostReason::WrongLock { side, offset_px, support, rival, updates } => write!(
-                f,
-                "wrong lock: side {side} is on an edge {support} of its points found, a parallel edge {offset_px:+.0} px away \
-                 was found by {rival}, for {updates} updates in a row"
-            ),
+            LostReason::WrongLock { side, offset_px, turn_px, support, rival, updates } => {
+                write!(f, "wrong lock: side {side} is on an edge {support} of its points found, ")?;
+                if *turn_px == 0.0 {
+                    write!(f, "a parallel edge {offset_px:+.0} px away")?;
+                } else {
+                    write!(f, "an edge {offset_px:+.0} px away at its middle and turned {turn_px:+.0} px over its length")?;
+                }
+                write!(f, " was found by {rival}, on {updates} more updates than not")
+            }
         }
     }
 }

@@ -14,6 +14,15 @@ use super::search::PointEdges;
 /// Bins of the rival histogram: offsets of ±47 px in 1 px steps (the search reaches ±40).
 const RIVAL_BINS: usize = 95;
 
+/// Turns of the rival lines tried, as the difference of their offsets from the fitted side at
+/// the side's two ends, px. A side that slid onto another edge need not stay parallel to the
+/// face's own: a side that turned onto a texture line, or a contour sheared as a whole by a
+/// start on the wrong edge (the left face's far bottom corner 10-13 px up its silhouette on
+/// the real sequence), leaves the face's edge beside it at an angle, 5-20 px out of parallel
+/// over the side. Steps of 5 px keep any line within 2.5 px of one tried at the side's ends,
+/// 1.25 px on average: inside the band a point's edge must fall in.
+const TURNS_PX: [f64; 9] = [0.0, -5.0, 5.0, -10.0, 10.0, -15.0, 15.0, -20.0, 20.0];
+
 /// The side with the strongest rival edge after a wide pass.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct Rival {
@@ -23,74 +32,103 @@ pub(crate) struct Rival {
     pub support: usize,
     /// Points of the side with an edge within the band of the rival line.
     pub rival: usize,
-    /// The rival line's offset from the fitted side along the outward normal, px.
+    /// The rival line's offset from the fitted side along the outward normal at the side's
+    /// middle, px.
     pub offset_px: f64,
+    /// How much further out the rival line lies at the side's end than at its start, px (0:
+    /// parallel).
+    pub turn_px: f64,
     /// Points on the side.
     pub count: usize,
 }
 
 /// Per side, a histogram of where the points' candidate edges lie relative to the fitted
 /// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
-/// axis as the candidates' `h_px`). The side's support is the points with an edge within
-/// `band_px` of it; a rival's, the points with an edge within `band_px` of a parallel line at
-/// least `min_offset_px` (and more than `2 band_px`) away, so that no edge counts for both.
-/// Each point counts once per line. Returns the side whose best rival outnumbers its support
-/// the most. Allocates nothing.
+/// axis as the candidates' `h_px`), once per turn in [`TURNS_PX`] (the offsets measured from
+/// a line turned that much about the side's middle). The side's support is the points with an
+/// edge within `band_px` of it; a rival's, the points with an edge within `band_px` of another
+/// line whose offset from the side reaches at least `min_offset_px` (and more than
+/// `2 band_px`) at one of the side's ends, so that, parallel, no edge counts for both. Each
+/// point counts once per line; only parallel lines unless `turned`. Returns the side whose
+/// best rival outnumbers its support the
+/// most, among the sides where one could by `margin` points: a side with fewer than `margin`
+/// points without its edge, or without an edge at all, is not searched for rivals (the turned
+/// lines cost ~9 histograms a side). Allocates
+/// nothing.
 pub(crate) fn strongest_rival(
     sides: &[TemplateEdge],
     edges: &[PointEdges],
     fitted_px: &[f64],
     band_px: f64,
     min_offset_px: f64,
+    margin: usize,
+    turned: bool,
 ) -> Rival {
+    let turns = if turned { &TURNS_PX[..] } else { &TURNS_PX[..1] };
     let half = (RIVAL_BINS / 2) as i64;
     let half_f = half as f64;
-    let min_offset = min_offset_px.max(2.0 * band_px + 1.0).ceil() as i64;
+    let min_offset = min_offset_px.max(2.0 * band_px + 1.0).ceil();
     let mut best = Rival::default();
     let mut best_excess = i64::MIN;
     for (s, side) in sides.iter().enumerate().filter(|(_, s)| s.count > 0) {
-        let mut votes = [0u16; RIVAL_BINS];
-        // The last point that voted for each line, counted from 1 along the side.
-        let mut voter = [0u16; RIVAL_BINS];
-        let mut support = 0usize;
-        for (j, i) in (side.first..side.first + side.count).enumerate() {
-            let (j, fitted) = (j as u16 + 1, fitted_px[i]);
-            if !fitted.is_finite() {
-                continue;
-            }
-            let mut on_side = false;
-            for c in edges[i].as_slice() {
-                let r = f64::from(c.h_px) - fitted;
-                on_side |= r.abs() <= band_px;
-                // Bins `lo..=hi` (offset + `half`, so never negative here): the lines within
-                // `band_px` of this edge. Truncation is `floor` for the positive values kept;
-                // `f64::floor` would be a library call on the baseline x86-64 target.
-                let (from, to) = (r - band_px + half_f, r + band_px + half_f);
-                if to < 0.0 || from > 2.0 * half_f {
+        let mid = 0.5 * (side.count as f64 - 1.0);
+        let (mut support, mut with_edge) = (0usize, 0usize);
+        for i in side.first..side.first + side.count {
+            let fitted = fitted_px[i];
+            let found = edges[i].as_slice();
+            with_edge += usize::from(fitted.is_finite() && !found.is_empty());
+            support += usize::from(fitted.is_finite() && found.iter().any(|c| (f64::from(c.h_px) - fitted).abs() <= band_px));
+        }
+        // A rival holds at most the points with an edge: none can outnumber the side by
+        // `margin` and hold most of its points.
+        if with_edge < support + margin || 2 * with_edge <= side.count {
+            continue;
+        }
+        let (mut rival, mut offset, mut turn) = (0usize, 0i64, 0.0);
+        for &turn_px in turns {
+            let slope = if side.count > 1 { turn_px / (side.count as f64 - 1.0) } else { 0.0 };
+            let mut votes = [0u16; RIVAL_BINS];
+            // The last point that voted for each line, counted from 1 along the side.
+            let mut voter = [0u16; RIVAL_BINS];
+            for (j, i) in (side.first..side.first + side.count).enumerate() {
+                let fitted = fitted_px[i] + slope * (j as f64 - mid);
+                let j = j as u16 + 1;
+                if !fitted.is_finite() {
                     continue;
                 }
-                let lo = from.max(0.0) as usize;
-                let lo = if (lo as f64) < from { lo + 1 } else { lo };
-                let hi = (to.min(2.0 * half_f) as usize).min(RIVAL_BINS - 1);
-                for b in lo..=hi {
-                    // Without a branch: which point voted last is unpredictable.
-                    votes[b] += u16::from(voter[b] != j);
-                    voter[b] = j;
+                for c in edges[i].as_slice() {
+                    let r = f64::from(c.h_px) - fitted;
+                    // Bins `lo..=hi` (offset + `half`, so never negative here): the lines
+                    // within `band_px` of this edge. Truncation is `floor` for the positive
+                    // values kept; `f64::floor` would be a library call on the baseline x86-64
+                    // target.
+                    let (from, to) = (r - band_px + half_f, r + band_px + half_f);
+                    if to < 0.0 || from > 2.0 * half_f {
+                        continue;
+                    }
+                    let lo = from.max(0.0) as usize;
+                    let lo = if (lo as f64) < from { lo + 1 } else { lo };
+                    let hi = (to.min(2.0 * half_f) as usize).min(RIVAL_BINS - 1);
+                    for b in lo..=hi {
+                        // Without a branch: which point voted last is unpredictable.
+                        votes[b] += u16::from(voter[b] != j);
+                        voter[b] = j;
+                    }
                 }
             }
-            support += usize::from(on_side);
-        }
-        let (mut rival, mut offset) = (0usize, 0i64);
-        for (b, &v) in votes.iter().enumerate() {
-            let o = b as i64 - half;
-            if o.abs() >= min_offset && usize::from(v) > rival {
-                (rival, offset) = (usize::from(v), o);
+            // A line qualifies where it is far enough from the side at one end (`o ± turn/2`).
+            let reach = 0.5 * turn_px.abs();
+            for (b, &v) in votes.iter().enumerate() {
+                let o = b as i64 - half;
+                if (o as f64).abs() + reach >= min_offset && usize::from(v) > rival {
+                    (rival, offset, turn) = (usize::from(v), o, turn_px);
+                }
             }
         }
         let excess = rival as i64 - support as i64;
         if excess > best_excess {
             best_excess = excess;
-            best = Rival { side: s, support, rival, offset_px: offset as f64, count: side.count };
+            best = Rival { side: s, support, rival, offset_px: offset as f64, turn_px: turn, count: side.count };
         }
     }
     best
@@ -136,22 +174,56 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
         assert_eq!((r.side, r.support), (0, 8), "{r:?}");
         assert!(r.rival >= 19 && (r.offset_px - 7.0).abs() <= 1.0, "{r:?}");
     }
 
     #[test]
+    fn an_edge_at_an_angle_to_the_side_that_most_points_see_is_a_rival() {
+        // A sheared contour: the face's edge runs 8 px inside the fitted side at its start
+        // and 4 px outside at its end (12 px of turn over the side, 6.3° over ~110 px), seen
+        // by 20 of 24 points; the side's own edge by 6 of them and by the 4 where the lines
+        // cross.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = vec![-8.0 + 12.0 * i as f32 / 23.0];
+            if (7..13).contains(&i) {
+                o.push(0.2);
+            }
+            if i >= 20 {
+                o.remove(0);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        assert_eq!(r.support, 10, "{r:?}");
+        assert!(r.rival >= 18, "{r:?}");
+        assert!((r.turn_px - 12.0).abs() <= 2.5 && (r.offset_px + 2.0).abs() <= 1.5, "{r:?}");
+        // No parallel line holds as many of its points.
+        assert!(r.turn_px != 0.0, "{r:?}");
+    }
+
+    #[test]
     fn the_other_flank_of_a_thin_line_and_scattered_texture_are_no_rivals() {
-        // Every point sees the side's edge; most also see the other flank of a thin dark line
-        // 3 px out (nearer than the 5 px a rival must be), and texture edges scattered 5-10 px
-        // away that no straight line through them explains.
+        // Two in three points see the side's edge (a textured face's edge); all see the other
+        // flank of a thin dark line 3 px out (nearer than the 5 px a rival must be), and
+        // texture edges scattered 5-10 px away that no straight line, parallel or turned,
+        // through them explains.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = vec![3.1, 5.0 + (i * 7 % 6) as f32, -5.0 - (i * 5 % 6) as f32];
+            if i % 3 != 0 {
+                o.push(0.2);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        assert_eq!(r.support, 16, "{r:?}");
+        assert!(r.rival < r.support + 3, "{r:?}");
+        // A side whose every point sees its edge has no rival to search for.
         let (sides, edges, fitted) = side(24, |i| vec![0.2, 3.1, 5.0 + (i * 7 % 6) as f32, -5.0 - (i * 5 % 6) as f32]);
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0);
-        assert_eq!(r.support, 24, "{r:?}");
-        assert!(r.rival < 24, "{r:?}");
+        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true).rival, 0);
         // A point with two candidates on the same line counts once.
         let (sides, edges, fitted) = side(24, |_| vec![6.0, 6.4]);
-        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0).rival, 24);
+        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true).rival, 24);
     }
 }
