@@ -264,9 +264,10 @@ pub struct PlanOutput {
     /// rejections; `None` when nothing was reconstructed near the point, or when what was
     /// reconstructed fails only rules that say what the cameras saw (see `unjudged`).
     pub refusal: Option<String>,
-    /// With no target and no refusal: the pointed block was seen, but no face of it that the
-    /// grasp rules can judge (only its top, or only faces turned past the view-angle rule),
-    /// in words. Not a refusal: the judge on true geometry may well find a grasp.
+    /// With no target and no refusal: the pointed block was seen, but not so that the grasp
+    /// rules can judge it (only its top, only faces turned past the view-angle rule, or
+    /// fingers hitting only its own other faces as reconstructed), in words. Not a refusal:
+    /// the judge on true geometry may well find a grasp.
     pub unjudged: Option<String>,
 }
 
@@ -699,7 +700,7 @@ fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: O
     };
     let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
     let why = why_no_grasp(rejected, name, config);
-    Some(if refusal_grounded(rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
+    Some(if refusal_grounded(&ps.scene, rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
 }
 
 #[cfg(test)]
