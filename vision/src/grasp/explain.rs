@@ -3,7 +3,7 @@
 //! the daemon's refusal (on its own reconstruction), so that the two say the same thing the
 //! same way.
 
-use super::{GraspConfig, GraspScene, RejectReason, Rejection};
+use super::{EdgeRef, FeatureRef, GraspConfig, GraspScene, RejectReason, Rejection};
 
 /// How far a rejection got through the rules: of a facet's rejections the furthest says best
 /// why it failed. A collision of the zero-width pairing (the thesis's thin wall: a top edge
@@ -38,21 +38,25 @@ fn magnitude(r: &RejectReason) -> f64 {
 /// got past a rule with one edge pairing is not refused by that rule on another. A refusal
 /// needs some facet whose furthest rule is one the judge on true geometry also applies, on
 /// geometry a single view gets right: a steep top edge, no parallel edge behind within
-/// reach, too wide, a collision with *another* object. Not grounded: the stages that say
-/// only what the cameras saw (no vertical face, no top edge, a face turned from the
-/// cameras, the thin-wall pairing of a top edge with itself), and collisions with the
-/// block's own other faces: those are the faces one stereo pair reconstructs worst (seen
-/// obliquely or barely, a top face skewed by 20°, a false match spanning two levels of an
-/// L-block), so a finger "hitting" one says more about the reconstruction than the block.
+/// reach, too wide, a collision with a *facet* of another object. Not grounded: the stages
+/// that say only what the cameras saw (no vertical face, no top edge, a face turned from the
+/// cameras, the thin-wall pairing of a top edge with itself); collisions with the block's
+/// own other faces: those are the faces one stereo pair reconstructs worst (seen obliquely
+/// or barely, a top face skewed by 20°, a false match spanning two levels of an L-block), so
+/// a finger "hitting" one says more about the reconstruction than the block; and collisions
+/// with a loose edge (one matched segment pair on no plane: a false match as often as a
+/// surface in the way).
 /// A block seen only from its top, or only by faces the daemon's view-angle rule leaves
 /// out, has not been judged, so it is no refusal.
 pub fn refusal_grounded(scene: &GraspScene, rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>) -> bool {
     furthest_per_facet(rejected, &facet_name).into_iter().any(|(facet, r)| {
-        let own_collision = match r.reason {
-            RejectReason::FingerCollision { feature } | RejectReason::BodyCollision { feature } => scene.component_of(feature) == scene.facets[facet].component,
+        let weak_collision = match r.reason {
+            RejectReason::FingerCollision { feature } | RejectReason::BodyCollision { feature } => {
+                matches!(feature, FeatureRef::Edge(EdgeRef::Loose(_))) || scene.component_of(feature) == scene.facets[facet].component
+            }
             _ => false,
         };
-        progress(r) >= 2 && !own_collision
+        progress(r) >= 2 && !weak_collision
     })
 }
 
@@ -123,7 +127,7 @@ mod tests {
     use nalgebra::Vector3;
 
     use super::*;
-    use crate::grasp::{EdgeRef, FeatureRef, SceneFacet};
+    use crate::grasp::{SceneEdge, SceneFacet, Segment3};
 
     fn rejection(facet: usize, reason: RejectReason) -> Rejection {
         Rejection { facet, front_edge: None, rear_edge: None, site: None, reason }
@@ -149,12 +153,13 @@ mod tests {
         assert_eq!(why_no_grasp(&rejected[4..5], |_| Some("x".into()), &c), "none of its faces is within 20° of vertical");
     }
 
-    /// Facets 0-4 one block (component 0), facet 5 another (component 1); only the
-    /// components matter here.
+    /// Facets 0-4 one block (component 0), facet 5 and a loose edge another (component 1);
+    /// only the components matter here.
     fn two_blocks() -> GraspScene {
         let square = |x: f64| vec![Vector3::new(x, 0.0, 0.0), Vector3::new(x, 0.03, 0.0), Vector3::new(x, 0.03, 0.03), Vector3::new(x, 0.0, 0.03)];
         let facets = (0..6).map(|k| SceneFacet { polygon_m: square(0.1 * k as f64), edges: Vec::new(), component: usize::from(k == 5) }).collect();
-        GraspScene { facets, edges: Vec::new(), toward_viewer: Vector3::new(1.0, 0.0, 1.0) }
+        let edges = vec![SceneEdge { segment: Segment3::new(Vector3::new(0.6, 0.0, 0.05), Vector3::new(0.6, 0.03, 0.05)), component: 1 }];
+        GraspScene { facets, edges, toward_viewer: Vector3::new(1.0, 0.0, 1.0) }
     }
 
     #[test]
@@ -189,6 +194,10 @@ mod tests {
         assert!(!refusal_grounded(&scene, &[finger(0, 4)], all));
         let body = rejection(0, RejectReason::BodyCollision { feature: FeatureRef::Edge(EdgeRef::Facet { facet: 2, edge: 0 }) });
         assert!(!refusal_grounded(&scene, &[body], all));
+        // A loose edge of another object (one matched segment pair, on no plane) is not
+        // enough (clutter3 seed 120: the body "hit" such an edge above an L-block).
+        let loose = rejection(0, RejectReason::BodyCollision { feature: FeatureRef::Edge(EdgeRef::Loose(0)) });
+        assert!(!refusal_grounded(&scene, &[loose], all));
         // Seed 26 (--disturb): the L-block's side face has one top edge at the step, cut into a
         // 38° slope, and a flat one whose pairing got as far as a finger on a false facet of
         // the block. The facet is judged by its furthest rule: no refusal.
