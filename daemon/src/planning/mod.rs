@@ -513,6 +513,28 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 *summary.sites.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
             }
         }
+        // A face seen from a top down to a lower top in front of it (an L-block's step, see
+        // `hypothesise_front_faces`) is the join between the two: one object. Without it the
+        // L's two legs are two blocks, and a grasp across the whole L sees the tall leg as
+        // another block in the rear finger's way.
+        let mut merges: Vec<(usize, usize)> =
+            ps.facets[planned_facets..].iter().zip(&ps.scene.facets[planned_facets..]).filter_map(|(src, f)| src.steps_onto.map(|c| (c, f.component))).collect();
+        while let Some((from, to)) = merges.pop() {
+            if from == to {
+                continue;
+            }
+            for c in ps.scene.facets.iter_mut().map(|f| &mut f.component).chain(ps.scene.edges.iter_mut().map(|e| &mut e.component)) {
+                if *c == from {
+                    *c = to;
+                }
+            }
+            for m in merges.iter_mut().flat_map(|(a, b)| [a, b]) {
+                if *m == from {
+                    *m = to;
+                }
+            }
+            *summary.sites.rejected_by_reason.entry("tops_joined_by_a_step".into()).or_insert(0) += 1;
+        }
         // A hypothesised face (anchored on a top face's edge and the table, its bottom edge
         // seen) that covers a planner facet of the same object in both images is that
         // facet's surface: the planner reconstructed it off the face (else the face would
@@ -551,7 +573,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             hypothesised: false,
         });
     }
-    for (k, src) in ps.facets.iter().enumerate().skip(planned_facets) {
+    // Hypothesised faces: after the superseded planner facets went, they no longer start at
+    // `planned_facets`.
+    for (k, src) in ps.facets.iter().enumerate().filter(|(_, src)| src.hypothesised) {
         summary.scene.facets.push(FacetSummary {
             plan_facet: src.plan_facet,
             left_px: to_tracker(&src.left_px),
