@@ -228,6 +228,17 @@ pub struct PlanInputs {
     /// The gripper's masked region in both views, tracker pixels.
     pub masks_px: [Vec<[f64; 2]>; 2],
     pub masked_px: [usize; 2],
+    /// The calibration's cage (tool positions, m, and the reference point's images, tracker
+    /// pixels) and the tool-from-reference lever, m: with `model` and the saved pair
+    /// (`plan_left.png`, `plan_right.png`, already masked) they are the whole geometry of
+    /// the plan, so that it can be rerun from a run's report in seconds. Absent in reports
+    /// written before they were kept.
+    #[serde(default)]
+    pub cage_robot_m: Vec<[f64; 3]>,
+    #[serde(default)]
+    pub cage_image_px: Vec<[f64; 4]>,
+    #[serde(default)]
+    pub lever_m: Option<[f64; 3]>,
 }
 
 /// The stereo geometry the planner used.
@@ -427,6 +438,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             indicated_m: req.scene.indicated_m,
             indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
             masks_px: req.masks.clone(),
+            cage_robot_m: req.calibration.cage_robot_m.iter().map(arr3).collect(),
+            cage_image_px: req.calibration.cage_image_px.clone(),
+            lever_m: Some(req.calibration.lever_m),
             ..Default::default()
         },
         ..Default::default()
@@ -784,10 +798,11 @@ mod json_shape_tests {
         summary.geometry.model = Some(serde_json::json!({ "c": [1.0, 2.0, 3.0, 4.0] }));
         summary.timing.total_ms = 12.5;
         let value = serde_json::to_value(&summary).unwrap();
-        // The keys of plan.json before its fields were grouped.
+        // The keys of plan.json before its fields were grouped, and the cage kept since.
         let mut expected = vec![
             "segments", "matches", "planes", "facets", "candidates", "chosen", "rejected_sites", "rejected_by_reason",
             "facet_rejections", "superseded_facets", "image_rear_edges", "indicated_m", "indicated_px", "masks_px", "masked_px",
+            "cage_robot_m", "cage_image_px", "lever_m",
             "model", "bootstrap_rms_px", "projective_residual_px", "planner_ms", "total_ms",
         ];
         expected.sort_unstable();
@@ -801,5 +816,11 @@ mod json_shape_tests {
         assert_eq!(value["chosen"]["distance_mm"], serde_json::Value::Null);
         let back: PlanSummary = serde_json::from_value(value.clone()).unwrap();
         assert_eq!(serde_json::to_value(&back).unwrap(), value);
+        // Reports written before the cage was kept still read.
+        let mut old = value.clone();
+        for key in ["cage_robot_m", "cage_image_px", "lever_m"] {
+            old.as_object_mut().unwrap().remove(key);
+        }
+        assert!(serde_json::from_value::<PlanSummary>(old).is_ok());
     }
 }
