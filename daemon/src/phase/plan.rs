@@ -252,7 +252,7 @@ impl PlanPhase {
                     }
                     if let Some(seen) = unjudged {
                         return Step::fail(FailureKind::NoGraspSite, format!(
-                            "plan: no grasp site: no face of the pointed block was seen that the grasp rules can judge ({seen}); not a refusal"
+                            "plan: no grasp site: what was seen of the pointed block does not settle whether it can be grasped ({seen}); not a refusal"
                         ));
                     }
                     if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {

@@ -228,6 +228,17 @@ pub struct PlanInputs {
     /// The gripper's masked region in both views, tracker pixels.
     pub masks_px: [Vec<[f64; 2]>; 2],
     pub masked_px: [usize; 2],
+    /// The calibration's cage (tool positions, m, and the reference point's images, tracker
+    /// pixels) and the tool-from-reference lever, m: with `model` and the saved pair
+    /// (`plan_left.png`, `plan_right.png`, already masked) they are the whole geometry of
+    /// the plan, so that it can be rerun from a run's report in seconds. Absent in reports
+    /// written before they were kept.
+    #[serde(default)]
+    pub cage_robot_m: Vec<[f64; 3]>,
+    #[serde(default)]
+    pub cage_image_px: Vec<[f64; 4]>,
+    #[serde(default)]
+    pub lever_m: Option<[f64; 3]>,
 }
 
 /// The stereo geometry the planner used.
@@ -264,9 +275,10 @@ pub struct PlanOutput {
     /// rejections; `None` when nothing was reconstructed near the point, or when what was
     /// reconstructed fails only rules that say what the cameras saw (see `unjudged`).
     pub refusal: Option<String>,
-    /// With no target and no refusal: the pointed block was seen, but no face of it that the
-    /// grasp rules can judge (only its top, or only faces turned past the view-angle rule),
-    /// in words. Not a refusal: the judge on true geometry may well find a grasp.
+    /// With no target and no refusal: the pointed block was seen, but not so that the grasp
+    /// rules can judge it (only its top, only faces turned past the view-angle rule, or
+    /// fingers hitting only its own other faces as reconstructed), in words. Not a refusal:
+    /// the judge on true geometry may well find a grasp.
     pub unjudged: Option<String>,
 }
 
@@ -426,6 +438,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             indicated_m: req.scene.indicated_m,
             indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
             masks_px: req.masks.clone(),
+            cage_robot_m: req.calibration.cage_robot_m.iter().map(arr3).collect(),
+            cage_image_px: req.calibration.cage_image_px.clone(),
+            lever_m: Some(req.calibration.lever_m),
             ..Default::default()
         },
         ..Default::default()
@@ -512,6 +527,28 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 *summary.sites.rejected_by_reason.entry("hypothesised_face_unseen".into()).or_insert(0) += 1;
             }
         }
+        // A face seen from a top down to a lower top in front of it (an L-block's step, see
+        // `hypothesise_front_faces`) is the join between the two: one object. Without it the
+        // L's two legs are two blocks, and a grasp across the whole L sees the tall leg as
+        // another block in the rear finger's way.
+        let mut merges: Vec<(usize, usize)> =
+            ps.facets[planned_facets..].iter().zip(&ps.scene.facets[planned_facets..]).filter_map(|(src, f)| src.steps_onto.map(|c| (c, f.component))).collect();
+        while let Some((from, to)) = merges.pop() {
+            if from == to {
+                continue;
+            }
+            for c in ps.scene.facets.iter_mut().map(|f| &mut f.component).chain(ps.scene.edges.iter_mut().map(|e| &mut e.component)) {
+                if *c == from {
+                    *c = to;
+                }
+            }
+            for m in merges.iter_mut().flat_map(|(a, b)| [a, b]) {
+                if *m == from {
+                    *m = to;
+                }
+            }
+            *summary.sites.rejected_by_reason.entry("tops_joined_by_a_step".into()).or_insert(0) += 1;
+        }
         // A hypothesised face (anchored on a top face's edge and the table, its bottom edge
         // seen) that covers a planner facet of the same object in both images is that
         // facet's surface: the planner reconstructed it off the face (else the face would
@@ -550,7 +587,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             hypothesised: false,
         });
     }
-    for (k, src) in ps.facets.iter().enumerate().skip(planned_facets) {
+    // Hypothesised faces: after the superseded planner facets went, they no longer start at
+    // `planned_facets`.
+    for (k, src) in ps.facets.iter().enumerate().filter(|(_, src)| src.hypothesised) {
         summary.scene.facets.push(FacetSummary {
             plan_facet: src.plan_facet,
             left_px: to_tracker(&src.left_px),
@@ -699,7 +738,7 @@ fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: O
     };
     let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
     let why = why_no_grasp(rejected, name, config);
-    Some(if refusal_grounded(rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
+    Some(if refusal_grounded(&ps.scene, rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
 }
 
 #[cfg(test)]
@@ -759,10 +798,11 @@ mod json_shape_tests {
         summary.geometry.model = Some(serde_json::json!({ "c": [1.0, 2.0, 3.0, 4.0] }));
         summary.timing.total_ms = 12.5;
         let value = serde_json::to_value(&summary).unwrap();
-        // The keys of plan.json before its fields were grouped.
+        // The keys of plan.json before its fields were grouped, and the cage kept since.
         let mut expected = vec![
             "segments", "matches", "planes", "facets", "candidates", "chosen", "rejected_sites", "rejected_by_reason",
             "facet_rejections", "superseded_facets", "image_rear_edges", "indicated_m", "indicated_px", "masks_px", "masked_px",
+            "cage_robot_m", "cage_image_px", "lever_m",
             "model", "bootstrap_rms_px", "projective_residual_px", "planner_ms", "total_ms",
         ];
         expected.sort_unstable();
@@ -776,5 +816,11 @@ mod json_shape_tests {
         assert_eq!(value["chosen"]["distance_mm"], serde_json::Value::Null);
         let back: PlanSummary = serde_json::from_value(value.clone()).unwrap();
         assert_eq!(serde_json::to_value(&back).unwrap(), value);
+        // Reports written before the cage was kept still read.
+        let mut old = value.clone();
+        for key in ["cage_robot_m", "cage_image_px", "lever_m"] {
+            old.as_object_mut().unwrap().remove(key);
+        }
+        assert!(serde_json::from_value::<PlanSummary>(old).is_ok());
     }
 }

@@ -207,6 +207,10 @@ pub fn strongest_shift(img: &ImageBuf, a: [f64; 2], b: [f64; 2], dir: [f64; 2], 
     (lo + hi) as f64 / 2.0 - f64::from(reach)
 }
 
+/// How near the image border an edge cannot be seen, px: [`edge_support`] samples 2 px
+/// either side of points up to 3 px off the line.
+pub const BORDER_PX: f64 = 5.0;
+
 /// Where the bottom edge of a face hung from a top edge down to the table shows in one view:
 /// `quad` is its outline (tracker pixels) bottom corners first, `[a0, b0, b, a]`, its bottom
 /// placed by a model that may be a few pixels off at table height (the cage of reference
@@ -216,8 +220,21 @@ pub fn strongest_shift(img: &ImageBuf, a: [f64; 2], b: [f64; 2], dir: [f64; 2], 
 /// must be one face: no edge along it inside, more than 6 px from both (the tall leg of an
 /// L-block over its low leg shows the step there). Returns the image offset to add to the
 /// bottom corners; `None` when the face is not seen.
+///
+/// A face whose bottom corners the model puts past the image border (within
+/// [`BORDER_PX`] of it, or outside) cannot show its bottom edge: the border is not an edge.
+/// Such a face is seen when its top edge is inside the image and it is one face down to
+/// where the image ends; its bottom stays where the model put it (offset zero).
 pub fn bottom_edge_offset(img: &ImageBuf, quad: &[[f64; 2]], min_support: f64) -> Option<[f64; 2]> {
     let [a0, b0, b, a] = <[[f64; 2]; 4]>::try_from(quad).ok()?;
+    let inside = |p: [f64; 2]| {
+        let (w, h) = (img.width as f64, img.height as f64);
+        p[0] >= BORDER_PX && p[1] >= BORDER_PX && p[0] <= w - 1.0 - BORDER_PX && p[1] <= h - 1.0 - BORDER_PX
+    };
+    let cut_by_border = !(inside(a0) && inside(b0));
+    if cut_by_border && !(inside(a) && inside(b)) {
+        return None;
+    }
     let (ua, ub) = ([a[0] - a0[0], a[1] - a0[1]], [b[0] - b0[0], b[1] - b0[1]]);
     let height_px = 0.5 * (ua[0].hypot(ua[1]) + ub[0].hypot(ub[1]));
     let up = [ua[0] + ub[0], ua[1] + ub[1]];
@@ -226,9 +243,9 @@ pub fn bottom_edge_offset(img: &ImageBuf, quad: &[[f64; 2]], min_support: f64) -
         return None;
     }
     let up = [up[0] / norm, up[1] / norm];
-    let s = strongest_shift(img, a0, b0, up, 0.3 * height_px);
     let moved = |p: [f64; 2], d: f64| [p[0] + d * up[0], p[1] + d * up[1]];
-    if edge_support(img, moved(a0, s), moved(b0, s)) < min_support {
+    let s = if cut_by_border { 0.0 } else { strongest_shift(img, a0, b0, up, 0.3 * height_px) };
+    if !cut_by_border && edge_support(img, moved(a0, s), moved(b0, s)) < min_support {
         return None;
     }
     const MARGIN_PX: f64 = 6.0;
@@ -335,5 +352,30 @@ mod tests {
         // No bottom edge near where the model put it: not seen.
         let flat = ImageBuf::new(70, 60);
         assert_eq!(bottom_edge_offset(&flat, &quad, 0.6), None);
+    }
+
+    #[test]
+    fn a_hung_face_cut_by_the_image_border_is_seen_without_its_bottom_edge() {
+        // --disturb seed 4: the pointed cube across the right view's bottom border. Its face
+        // runs from y = 40 (top edge) off the image (60 rows); the model puts its bottom at
+        // y = 66, past the border.
+        let mut img = ImageBuf::new(70, 60);
+        for y in 0..60 {
+            for x in 0..70 {
+                img.set(x, y, if (20..50).contains(&x) && y >= 40 { 120 } else { 30 });
+            }
+        }
+        let quad = [[20.0, 66.0], [50.0, 66.0], [50.0, 40.0], [20.0, 40.0]];
+        assert_eq!(bottom_edge_offset(&img, &quad, 0.6), Some([0.0, 0.0]), "the border is not an edge");
+        // Still one face only: a step across it inside the image is not.
+        for y in 50..60 {
+            for x in 20..50 {
+                img.set(x, y, 200);
+            }
+        }
+        assert_eq!(bottom_edge_offset(&img, &quad, 0.6), None);
+        // Its top edge must be inside the image.
+        let above = [[20.0, 66.0], [50.0, 66.0], [50.0, 57.0], [20.0, 57.0]];
+        assert_eq!(bottom_edge_offset(&img, &above, 0.6), None);
     }
 }

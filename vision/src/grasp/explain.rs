@@ -3,7 +3,7 @@
 //! the daemon's refusal (on its own reconstruction), so that the two say the same thing the
 //! same way.
 
-use super::{GraspConfig, RejectReason, Rejection};
+use super::{EdgeRef, FeatureRef, GraspConfig, GraspScene, RejectReason, Rejection};
 
 /// How far a rejection got through the rules: of a facet's rejections the furthest says best
 /// why it failed. A collision of the zero-width pairing (the thesis's thin wall: a top edge
@@ -33,22 +33,36 @@ fn magnitude(r: &RejectReason) -> f64 {
     }
 }
 
-/// Whether the rejections of the facets that `facet_name` names ground a refusal: some facet
-/// got past the stages that say only what the cameras saw (no vertical face, no top edge, a
-/// face turned from the cameras, the thin-wall pairing of a top edge with itself) and failed
-/// a rule the judge on true geometry also applies (a steep top edge, no parallel edge
-/// behind within reach, too wide, a collision). A block seen only from its top, or only by
-/// faces the daemon's view-angle rule leaves out, has not been judged, so it is no refusal.
-pub fn refusal_grounded(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>) -> bool {
-    rejected.iter().any(|r| facet_name(r.facet).is_some() && progress(r) >= 2)
+/// Whether the rejections of the facets that `facet_name` names ground a refusal. Each
+/// facet is judged by its furthest rejection (the one [`why_no_grasp`] states): a facet that
+/// got past a rule with one edge pairing is not refused by that rule on another. A refusal
+/// needs some facet whose furthest rule is one the judge on true geometry also applies, on
+/// geometry a single view gets right: a steep top edge, no parallel edge behind within
+/// reach, too wide, a collision with a *facet* of another object. Not grounded: the stages
+/// that say only what the cameras saw (no vertical face, no top edge, a face turned from the
+/// cameras, the thin-wall pairing of a top edge with itself); collisions with the block's
+/// own other faces: those are the faces one stereo pair reconstructs worst (seen obliquely
+/// or barely, a top face skewed by 20°, a false match spanning two levels of an L-block), so
+/// a finger "hitting" one says more about the reconstruction than the block; and collisions
+/// with a loose edge (one matched segment pair on no plane: a false match as often as a
+/// surface in the way).
+/// A block seen only from its top, or only by faces the daemon's view-angle rule leaves
+/// out, has not been judged, so it is no refusal.
+pub fn refusal_grounded(scene: &GraspScene, rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>) -> bool {
+    furthest_per_facet(rejected, &facet_name).into_iter().any(|(facet, r)| {
+        let weak_collision = match r.reason {
+            RejectReason::FingerCollision { feature } | RejectReason::BodyCollision { feature } => {
+                matches!(feature, FeatureRef::Edge(EdgeRef::Loose(_))) || scene.component_of(feature) == scene.facets[facet].component
+            }
+            _ => false,
+        };
+        progress(r) >= 2 && !weak_collision
+    })
 }
 
-/// Why no grasp was found on the facets that `facet_name` names (`None`: a facet of another
-/// block, left out): per facet the furthest rule it failed (the nearest miss among equals),
-/// each phrase said once, steep top edges first as "its top edges slope N°" (the least
-/// slope: the one that came nearest). E.g. "its top edges slope 34°; behind its +x face the
-/// nearest parallel edge is 27 mm lower, past the fingers' 25 mm".
-pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>, config: &GraspConfig) -> String {
+/// Per facet that `facet_name` names, its furthest rejection (the nearest miss among
+/// equally far ones), in the order the facets first appear.
+fn furthest_per_facet<'a>(rejected: &'a [Rejection], facet_name: &impl Fn(usize) -> Option<String>) -> Vec<(usize, &'a Rejection)> {
     let mut per_facet: Vec<(usize, &Rejection)> = Vec::new();
     for r in rejected {
         if facet_name(r.facet).is_none() {
@@ -64,6 +78,16 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
             }
         }
     }
+    per_facet
+}
+
+/// Why no grasp was found on the facets that `facet_name` names (`None`: a facet of another
+/// block, left out): per facet the furthest rule it failed (the nearest miss among equals),
+/// each phrase said once, steep top edges first as "its top edges slope N°" (the least
+/// slope: the one that came nearest). E.g. "its top edges slope 34°; behind its +x face the
+/// nearest parallel edge is 27 mm lower, past the fingers' 25 mm".
+pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option<String>, config: &GraspConfig) -> String {
+    let per_facet = furthest_per_facet(rejected, &facet_name);
     let mut phrases: Vec<String> = Vec::new();
     let mut least_steep: Option<f64> = None;
     for (facet, r) in per_facet {
@@ -100,7 +124,10 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
 
 #[cfg(test)]
 mod tests {
+    use nalgebra::Vector3;
+
     use super::*;
+    use crate::grasp::{SceneEdge, SceneFacet, Segment3};
 
     fn rejection(facet: usize, reason: RejectReason) -> Rejection {
         Rejection { facet, front_edge: None, rear_edge: None, site: None, reason }
@@ -126,8 +153,18 @@ mod tests {
         assert_eq!(why_no_grasp(&rejected[4..5], |_| Some("x".into()), &c), "none of its faces is within 20° of vertical");
     }
 
+    /// Facets 0-4 one block (component 0), facet 5 and a loose edge another (component 1);
+    /// only the components matter here.
+    fn two_blocks() -> GraspScene {
+        let square = |x: f64| vec![Vector3::new(x, 0.0, 0.0), Vector3::new(x, 0.03, 0.0), Vector3::new(x, 0.03, 0.03), Vector3::new(x, 0.0, 0.03)];
+        let facets = (0..6).map(|k| SceneFacet { polygon_m: square(0.1 * k as f64), edges: Vec::new(), component: usize::from(k == 5) }).collect();
+        let edges = vec![SceneEdge { segment: Segment3::new(Vector3::new(0.6, 0.0, 0.05), Vector3::new(0.6, 0.03, 0.05)), component: 1 }];
+        GraspScene { facets, edges, toward_viewer: Vector3::new(1.0, 0.0, 1.0) }
+    }
+
     #[test]
     fn only_rules_the_judge_applies_ground_a_refusal() {
+        let scene = two_blocks();
         let all = |_: usize| Some("x".to_string());
         // Seen only from the top, or by a face turned past the daemon's view-angle rule, or
         // with no top edge: not judged.
@@ -136,13 +173,35 @@ mod tests {
             rejection(1, RejectReason::TurnedFromViewer { angle_rad: 1.1 }),
             rejection(2, RejectReason::NoTopEdge),
         ];
-        assert!(!refusal_grounded(&unseen, all));
+        assert!(!refusal_grounded(&scene, &unseen, all));
         // A steep top edge, or a rear edge out of reach, is the block's own geometry.
         let mut judged = unseen.to_vec();
         judged.push(rejection(3, RejectReason::TopEdgeTooSteep { slope_rad: 0.7 }));
-        assert!(refusal_grounded(&judged, all));
-        assert!(refusal_grounded(&[rejection(0, RejectReason::RearOutOfReach { drop_m: 0.03 })], all));
+        assert!(refusal_grounded(&scene, &judged, all));
+        assert!(refusal_grounded(&scene, &[rejection(0, RejectReason::RearOutOfReach { drop_m: 0.03 })], all));
         // ... but not on a facet of another block.
-        assert!(!refusal_grounded(&judged, |f| (f != 3).then(|| "x".to_string())));
+        assert!(!refusal_grounded(&scene, &judged, |f| (f != 3).then(|| "x".to_string())));
+    }
+
+    #[test]
+    fn a_finger_on_the_blocks_own_faces_grounds_no_refusal() {
+        let scene = two_blocks();
+        let all = |_: usize| Some("x".to_string());
+        let finger = |facet: usize, on: usize| rejection(facet, RejectReason::FingerCollision { feature: FeatureRef::Facet(on) });
+        // Another block in the fingers' way is the world's geometry: a refusal.
+        assert!(refusal_grounded(&scene, &[finger(0, 5)], all));
+        // The block's own other face (as reconstructed from one pair) is not.
+        assert!(!refusal_grounded(&scene, &[finger(0, 4)], all));
+        let body = rejection(0, RejectReason::BodyCollision { feature: FeatureRef::Edge(EdgeRef::Facet { facet: 2, edge: 0 }) });
+        assert!(!refusal_grounded(&scene, &[body], all));
+        // A loose edge of another object (one matched segment pair, on no plane) is not
+        // enough (clutter3 seed 120: the body "hit" such an edge above an L-block).
+        let loose = rejection(0, RejectReason::BodyCollision { feature: FeatureRef::Edge(EdgeRef::Loose(0)) });
+        assert!(!refusal_grounded(&scene, &[loose], all));
+        // Seed 26 (--disturb): the L-block's side face has one top edge at the step, cut into a
+        // 38° slope, and a flat one whose pairing got as far as a finger on a false facet of
+        // the block. The facet is judged by its furthest rule: no refusal.
+        let l_side = [rejection(0, RejectReason::TopEdgeTooSteep { slope_rad: 38f64.to_radians() }), finger(0, 4)];
+        assert!(!refusal_grounded(&scene, &l_side, all));
     }
 }

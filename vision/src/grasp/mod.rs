@@ -6,7 +6,8 @@
 //!    facet below them) must be within 30° of horizontal.
 //! 2. Only one side of an object is seen, so the opposite face is hypothesised: a *rear edge*
 //!    parallel to the top edge, on the same connected component, behind the facet (as seen
-//!    from the cameras). The top edge itself may serve (zero width: a thin wall).
+//!    from the cameras), not one of the facet's own edges. The top edge itself may serve
+//!    (zero width: a thin wall).
 //! 3. Of each (top edge, rear edge) pair only the most central site is tried: the middle of
 //!    the stretch where both edges overlap along the top edge. Its width (horizontal distance
 //!    between the two surfaces) must be at most 50 mm.
@@ -425,7 +426,8 @@ fn validate(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>) -> Result<()
 }
 
 impl GraspScene {
-    fn component_of(&self, f: FeatureRef) -> usize {
+    /// The connected component (object) a facet or edge belongs to.
+    pub fn component_of(&self, f: FeatureRef) -> usize {
         match f {
             FeatureRef::Facet(i) | FeatureRef::Edge(EdgeRef::Facet { facet: i, .. }) => self.facets[i].component,
             FeatureRef::Edge(EdgeRef::Loose(i)) => self.edges[i].component,
@@ -579,6 +581,13 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
                 continue;
             }
             for rear_ref in scene.component_edges(facet.component) {
+                // The facet's own other edges lie in its plane, not behind it: paired with
+                // the top edge they say nothing of the block's thickness (its bottom edge
+                // would read as a rear edge a block's height lower). The top edge with
+                // itself is the thin-wall hypothesis and stays.
+                if matches!(rear_ref, EdgeRef::Facet { facet, edge } if facet == fi && edge != ei) {
+                    continue;
+                }
                 let rear = scene.edge(rear_ref);
                 let dr = (rear.b_m - rear.a_m) / rear.length_m();
                 if d.dot(&dr).abs() < cos_parallel {

@@ -43,6 +43,10 @@ pub struct FacetSource {
     /// vertex for vertex with the scene facet's `polygon_m` (same first vertex, same order).
     pub left_px: Vec<[f64; 2]>,
     pub right_px: Vec<[f64; 2]>,
+    /// A hypothesised face hung from a top face down to a lower top face in front of it
+    /// (an L-block's step), not to the table: that lower face's component. Once the face is
+    /// seen, the two tops are one object (their join, the step, is this face).
+    pub steps_onto: Option<usize>,
 }
 
 /// A [`GraspScene`] built from a plan, with the image polygons of its facets.
@@ -162,7 +166,7 @@ pub fn scene_from_plan(plan: &Plan, toward_viewer: Vector3<f64>, max_height_m: f
         let n = polygon_m.len();
         let edges = (0..n).map(|k| Segment3::new(polygon_m[k], polygon_m[(k + 1) % n])).filter(|s| s.length_m() >= 1e-6).collect();
         facets.push((uf.find(fi), SceneFacet { polygon_m, edges, component: 0 }));
-        sources.push(FacetSource { plan_facet: fi, hypothesised: false, left_px: rotate(&f.facet.left), right_px: rotate(&f.facet.right) });
+        sources.push(FacetSource { plan_facet: fi, hypothesised: false, left_px: rotate(&f.facet.left), right_px: rotate(&f.facet.right), steps_onto: None });
     }
     let mut edges = Vec::new();
     let mut edge_matches = Vec::new();
@@ -232,6 +236,42 @@ fn unit_normal(poly: &[Vector3<f64>]) -> Option<Vector3<f64>> {
     n.try_normalize(1e-12)
 }
 
+/// The lower top face in front of the side `a`-`b` of top face `top` (outward horizontal
+/// normal `out`), if any: a facet within `max_tilt_rad` of horizontal, at least `min_z_m`
+/// high and `min_step_m` below the side, of another component, on the side's outward side,
+/// whose outline passes within `join_m` plus the step's height times `tan(max_tilt_rad)` of
+/// both ends in plan view. The highest such face (the step the side stands on), with its
+/// mean height.
+#[allow(clippy::too_many_arguments)]
+fn lower_top_in_front(
+    facets: &[SceneFacet],
+    top: usize,
+    (a, b): (Vector3<f64>, Vector3<f64>),
+    out: &Vector3<f64>,
+    min_z_m: f64,
+    min_step_m: f64,
+    max_tilt_rad: f64,
+    join_m: f64,
+) -> Option<(usize, f64)> {
+    let flat = |p: &Vector3<f64>| Vector3::new(p.x, p.y, 0.0);
+    let mid = 0.5 * (a + b);
+    let side_z = a.z.min(b.z);
+    facets
+        .iter()
+        .enumerate()
+        .filter(|&(g, f)| g != top && f.component != facets[top].component)
+        .filter_map(|(g, f)| {
+            let n = unit_normal(&f.polygon_m)?;
+            let z = f.polygon_m.iter().map(|p| p.z).sum::<f64>() / f.polygon_m.len() as f64;
+            let centroid = f.polygon_m.iter().sum::<Vector3<f64>>() / f.polygon_m.len() as f64;
+            let reach = join_m + (side_z - z) * max_tilt_rad.tan();
+            let outline: Vec<Vector3<f64>> = f.polygon_m.iter().map(flat).collect();
+            let under = [a, b].iter().all(|p| point_outline_m(&flat(p), &outline) <= reach);
+            (n.z.abs() >= max_tilt_rad.cos() && z >= min_z_m && side_z - z >= min_step_m && out.xy().dot(&(centroid - mid).xy()) > 0.0 && under).then_some((g, z))
+        })
+        .max_by(|x, y| x.1.total_cmp(&y.1))
+}
+
 /// Hypothesises the vertical faces the planner missed below the front edges of top faces:
 /// a block resting on the table has a vertical face under each outline edge of its top, and
 /// where that face looks towards the viewer the cameras see it. The thesis infers the
@@ -246,6 +286,12 @@ fn unit_normal(poly: &[Vector3<f64>]) -> Option<Vector3<f64>> {
 /// `max_view_angle_rad` of the viewer, unless a facet already runs along that side (its
 /// outline within `join_m` of both ends): a quadrilateral from the side down to the table,
 /// on the top face's object. Returns how many were added.
+///
+/// Where a lower top face lies in front of the side, its outline under both of the side's
+/// ends in plan view, the face goes down to that top's height instead (an L-block's step
+/// between its tall and its low leg; [`FacetSource::steps_onto`]): the reconstructed edges
+/// of the two tops may be apart in plan view by the join distance plus what a face within
+/// `max_tilt_rad` of vertical leans over the step's height.
 pub fn hypothesise_front_faces(
     ps: &mut PlannedScene,
     project: &dyn Fn(&Vector3<f64>) -> Option<[[f64; 2]; 2]>,
@@ -284,14 +330,22 @@ pub fn hypothesise_front_faces(
             if covered {
                 continue;
             }
-            let (a0, b0) = (Vector3::new(a.x, a.y, table_z_m), Vector3::new(b.x, b.y, table_z_m));
+            let step = lower_top_in_front(&ps.scene.facets, fi, (a, b), &out, table_z_m + min_height_m, min_height_m, max_tilt_rad, join_m);
+            let bottom_z = step.map_or(table_z_m, |(_, z)| z);
+            let (a0, b0) = (Vector3::new(a.x, a.y, bottom_z), Vector3::new(b.x, b.y, bottom_z));
             // Bottom corners first: the facet frame anchors at a corner with both sides long.
             let polygon_m = vec![a0, b0, b, a];
             let Some(px) = polygon_m.iter().map(project).collect::<Option<Vec<[[f64; 2]; 2]>>>() else { continue };
             let edges = (0..4).map(|e| Segment3::new(polygon_m[e], polygon_m[(e + 1) % 4])).collect();
             added.push((
                 SceneFacet { polygon_m, edges, component: f.component },
-                FacetSource { plan_facet: ps.facets[fi].plan_facet, hypothesised: true, left_px: px.iter().map(|p| p[0]).collect(), right_px: px.iter().map(|p| p[1]).collect() },
+                FacetSource {
+                    plan_facet: ps.facets[fi].plan_facet,
+                    hypothesised: true,
+                    left_px: px.iter().map(|p| p[0]).collect(),
+                    right_px: px.iter().map(|p| p[1]).collect(),
+                    steps_onto: step.map(|(g, _)| ps.scene.facets[g].component),
+                },
             ));
         }
     }
@@ -434,6 +488,51 @@ mod tests {
         // Where the planner did find the sides, nothing is hypothesised.
         let mut again = full.clone();
         assert_eq!(hypothesise_front_faces(&mut again, &project, 0.0, 0.01, 20f64.to_radians(), 80f64.to_radians(), 0.004), 0);
+    }
+
+    /// Seed 120 of clutter3: an L-block with its low leg towards the cameras (+x). The planner
+    /// found the two tops, 7 mm apart in plan view and as two objects (the step between them
+    /// unmatched). The tall top's front face goes down to the low top, not to the table (where
+    /// the low leg stands in front of it), and says which top it steps onto; the low top's
+    /// front face goes down to the table.
+    #[test]
+    fn a_top_face_over_a_lower_one_in_front_hangs_its_face_down_to_the_step() {
+        let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
+        let top = |x0: f64, x1: f64, z: f64| vec![p(x0, 0.0, z), p(x1, 0.0, z), p(x1, 0.03, z), p(x0, 0.03, z)];
+        let facet = |polygon_m: Vec<Vector3<f64>>, component: usize| {
+            let n = polygon_m.len();
+            let edges = (0..n).map(|i| Segment3::new(polygon_m[i], polygon_m[(i + 1) % n])).collect();
+            SceneFacet { polygon_m, edges, component }
+        };
+        let source = |plan_facet: usize| FacetSource { plan_facet, hypothesised: false, left_px: vec![[0.0; 2]; 4], right_px: vec![[0.0; 2]; 4], steps_onto: None };
+        // Tall top x 0..25 mm at 40 mm (its front edge 5 mm past the true step at 20 mm, as
+        // reconstructed), low top x 18..40 mm at 20 mm.
+        let mut ps = PlannedScene {
+            scene: GraspScene { facets: vec![facet(top(0.0, 0.025, 0.04), 0), facet(top(0.018, 0.04, 0.02), 1)], edges: Vec::new(), toward_viewer: p(1.0, 0.0, 0.8) },
+            facets: vec![source(0), source(1)],
+            edge_matches: Vec::new(),
+            dropped_facets: Vec::new(),
+        };
+        let project = |q: &Vector3<f64>| Some([[1000.0 * q.y, -1000.0 * q.z], [1000.0 * q.y + 5.0, -1000.0 * q.z]]);
+        let n = hypothesise_front_faces(&mut ps, &project, 0.0, 0.01, 20f64.to_radians(), 80f64.to_radians(), 0.006);
+        assert_eq!(n, 2, "one face under each top's +x side");
+        let hung: Vec<(&SceneFacet, &FacetSource)> = ps.scene.facets.iter().zip(&ps.facets).filter(|(_, s)| s.hypothesised).collect();
+        let bottom = |f: &SceneFacet| f.polygon_m.iter().map(|q| q.z).fold(f64::INFINITY, f64::min);
+        let (riser, riser_src) = hung.iter().find(|(f, _)| f.component == 0).expect("the tall top's face");
+        assert!((bottom(riser) - 0.02).abs() < 1e-12, "down to the low top, not the table: {:?}", riser.polygon_m);
+        assert_eq!(riser_src.steps_onto, Some(1));
+        let (front, front_src) = hung.iter().find(|(f, _)| f.component == 1).expect("the low top's face");
+        assert!(bottom(front).abs() < 1e-12);
+        assert_eq!(front_src.steps_onto, None);
+        // Two tops farther apart than a face within 20° of vertical leans over the 20 mm step
+        // (7.3 mm) plus the join distance are not a step: the face goes to the table.
+        let mut apart = ps.clone();
+        apart.scene.facets.truncate(2);
+        apart.facets.truncate(2);
+        apart.scene.facets[1] = facet(top(0.04, 0.06, 0.02), 1);
+        hypothesise_front_faces(&mut apart, &project, 0.0, 0.01, 20f64.to_radians(), 80f64.to_radians(), 0.006);
+        let tall = apart.scene.facets.iter().zip(&apart.facets).find(|(f, s)| s.hypothesised && f.component == 0).unwrap();
+        assert_eq!((bottom(tall.0), tall.1.steps_onto), (0.0, None));
     }
 
     #[test]
