@@ -359,11 +359,7 @@ impl ContourTracker {
             // once counting, every update.
             self.rival_updates > 0 || self.updates.is_multiple_of(2),
         );
-        // A rival counts when it outnumbers the side by the margin and holds most of the
-        // side's points: a face's edge of low contrast (a crease between two faces of the
-        // same grey) that only some of its points see is no evidence against it.
-        let r = &self.rival;
-        let outnumbered = r.rival >= r.support + self.config.rival_margin_points && 2 * r.rival > r.count;
+        let outnumbered = self.rival.outnumbers_its_side(self.config.rival_margin_points);
         self.rival_updates = if outnumbered { self.rival_updates + 1 } else { self.rival_updates.saturating_sub(1) };
     }
 

@@ -42,6 +42,20 @@ pub(crate) struct Rival {
     pub count: usize,
 }
 
+impl Rival {
+    /// Whether this rival is evidence of a wrong lock: it outnumbers its side by `margin`
+    /// points and holds most of the side's points (a face's edge of low contrast — a crease
+    /// between two faces of the same grey — that only some of its points see is no evidence
+    /// against it), and the side is on an edge at all (at least `margin` of its points see
+    /// one there). A side no edge holds has nothing to slide off: a facet side without
+    /// contrast, such as the open side of an L-shaped face the planner gave as a
+    /// quadrilateral (the step's edge beside it is then a "rival" every point sees), is
+    /// carried by the other sides' fit.
+    pub fn outnumbers_its_side(&self, margin: usize) -> bool {
+        self.support >= margin && self.rival >= self.support + margin && 2 * self.rival > self.count
+    }
+}
+
 /// Per side, a histogram of where the points' candidate edges lie relative to the fitted
 /// side (`fitted_px[i]`: the fitted contour's offset along point `i`'s search line, the same
 /// axis as the candidates' `h_px`), once per turn in [`TURNS_PX`] (the offsets measured from
@@ -177,6 +191,33 @@ mod tests {
         let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
         assert_eq!((r.side, r.support), (0, 8), "{r:?}");
         assert!(r.rival >= 19 && (r.offset_px - 7.0).abs() <= 1.0, "{r:?}");
+    }
+
+    #[test]
+    fn a_side_on_no_edge_beside_a_step_every_point_sees_is_not_a_wrong_lock() {
+        // The clutter3 seed-21 L-block: the planner's quadrilateral's top side lies across
+        // the face's open notch, where no edge is (1 of 24 points finds one), with the step
+        // 8 px below it that 20 points see: the strongest rival, but nothing slid off.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = if i < 20 { vec![-8.1] } else { vec![] };
+            if i == 5 {
+                o.push(0.2);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        assert!(r.support == 1 && r.rival >= 19, "{r:?}");
+        assert!(!r.outnumbers_its_side(3), "{r:?}");
+        // On an edge 8 of its points see, the same rival is a wrong lock.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = if i < 20 { vec![-8.1] } else { vec![] };
+            if i % 3 == 0 {
+                o.push(0.2);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        assert!(r.support == 8 && r.outnumbers_its_side(3), "{r:?}");
     }
 
     #[test]
