@@ -274,7 +274,7 @@ impl HardLoop {
                 self.recoveries += 1;
                 self.held_ns += held_ns;
                 self.mission.reporting.snapshot("reacquired");
-                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px, c.robot.tool_pos_m.map(f64::from));
                 let record = LossRecord { phase: p.name().into(), frame_id, what, held_s, outcome: outcome.into(), shifts_px, resumed: resumed.to_string(), search_passes, relapses };
                 self.losses.push(record);
                 Cmd::HOLD
