@@ -60,14 +60,10 @@ impl HardLoop {
     /// Remembers each confidently tracking contour's frame: a later search starts there
     /// rather than where a contour drifted to while it was being lost (nor from a candidate still
     /// being confirmed), and only from a frame
-    /// whose shape was steady and the contour's own ([`super::shape_watch::ShapeWatch`]).
-    ///
-    /// Not in the servo: there the arm's approach turns the plate out of its plane and changes
-    /// its image aspect by ~1.6 % a frame for seconds (pick_cube_bump), which the shape rule
-    /// reads as a squeeze, so a knock then searched from a stale base and lost the run; the
-    /// servo's losses (occluder, knocked view) are found again from the last confident frame.
+    /// whose shape was steady and the contour's own ([`super::shape_watch::ShapeWatch`]), in
+    /// every phase (the servo's approach changes the plate's shape fast but smoothly, which
+    /// the rule follows).
     pub(super) fn note_good_frames(&mut self, states: &StereoStates, now_ns: u64) {
-        let in_servo = self.phase.phase() == Phase::Servo;
         let cfg = &self.mission.cfg.safety;
         for role in [Role::Gripper, Role::Target] {
             let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
@@ -81,7 +77,7 @@ impl HardLoop {
                 }
                 let tracking = matches!(states.get(role, view), Some(TrackState::Tracking));
                 let frame = t.frame();
-                let shape_ok = self.shapes[i].observe(frame, t.update_count(), tracking) || in_servo;
+                let shape_ok = self.shapes[i].observe(frame, t.update_count(), tracking);
                 if tracking && shape_ok && t.confidence().score >= min {
                     self.last_good[i] = Some(LastGood { frame, time_ns: now_ns, velocity_px_s: t.velocity_px_per_s() });
                 }
@@ -278,7 +274,7 @@ impl HardLoop {
                 self.recoveries += 1;
                 self.held_ns += held_ns;
                 self.mission.reporting.snapshot("reacquired");
-                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px);
+                let resumed = self.phase.resume(&mut self.mission, now_ns, held_ns, knock, shifts_px, c.robot.tool_pos_m.map(f64::from));
                 let record = LossRecord { phase: p.name().into(), frame_id, what, held_s, outcome: outcome.into(), shifts_px, resumed: resumed.to_string(), search_passes, relapses };
                 self.losses.push(record);
                 Cmd::HOLD

@@ -83,6 +83,38 @@ impl CalibrationView {
 /// camera moved, px (a stopping arm drifts a few pixels at most).
 pub const CAMERA_MOVED_PX: f64 = 15.0;
 
+/// Cage points sampled before a loss from which the affine model is fitted to say where the
+/// plate should be: the model has 4 unknowns a coordinate, so 5 points leave one to check the
+/// fit by its residual.
+const MIN_POINTS_TO_PREDICT: usize = 5;
+
+/// Whether the cage points sampled so far (`robot_m`, `image_px`) put the plate, with the arm
+/// at `tool_m`, within [`CAMERA_MOVED_PX`] of where it was found again (`plate_px`, both
+/// views) with a fit residual within `max_residual_px`: then no camera moved, whatever the
+/// plate's shift from its search base (a base from before the arm stopped, or a squeezed one,
+/// is far from where the plate stands). Too few points, a failed or poor fit, or one view off
+/// the prediction: `false` (a camera may have moved, and the cage is visited again).
+pub fn samples_place_the_plate(robot_m: &[Vector3<f64>], image_px: &[[f64; 4]], tool_m: &Vector3<f64>, plate_px: &[f64; 4], max_residual_px: f64) -> bool {
+    if robot_m.len() < MIN_POINTS_TO_PREDICT {
+        return false;
+    }
+    let Ok(model) = AffineStereo::fit(robot_m, image_px) else { return false };
+    if model.residual_rms_px > max_residual_px {
+        return false;
+    }
+    let p = model.project(tool_m);
+    let off = |k: usize| (p[k] - plate_px[k]).hypot(p[k + 1] - plate_px[k + 1]);
+    off(0) <= CAMERA_MOVED_PX && off(2) <= CAMERA_MOVED_PX
+}
+
+/// The plate's reference point in both views now, px (`None` without both gripper trackers).
+pub fn plate_px(m: &Mission) -> Option<[f64; 4]> {
+    let (l, r) = (m.trackers.get(Role::Gripper, View::Left)?, m.trackers.get(Role::Gripper, View::Right)?);
+    let st = nalgebra::Vector2::new(m.plate.reference_st[0], m.plate.reference_st[1]);
+    let (pl, pr) = (l.image_from_template(st), r.image_from_template(st));
+    Some([pl.x, pl.y, pr.x, pr.y])
+}
+
 pub struct Calibrate {
     start_ns: u64,
     stage_ns: u64,
@@ -118,9 +150,12 @@ impl Calibrate {
     /// frames that lost the plate). A plate found `plate_shift_px` or more from where it was
     /// lost, with the arm held still, means the camera moved: the samples so far belong to
     /// the camera as it was, and the cage starts again (at `now_ns`, with a fresh time-out):
-    /// `true` then.
-    pub fn resume(&mut self, now_ns: u64, held_ns: u64, plate_shift_px: f64) -> bool {
-        if plate_shift_px > CAMERA_MOVED_PX && self.fitted.is_none() {
+    /// `true` then. Unless the points sampled so far place the plate (`plate_px`, with the arm
+    /// at `tool_m`) where it was found ([`samples_place_the_plate`]): a shift from a search
+    /// base the camera did not cause.
+    pub fn resume(&mut self, now_ns: u64, held_ns: u64, plate_shift_px: f64, plate_px: Option<[f64; 4]>, tool_m: Vector3<f64>, max_residual_px: f64) -> bool {
+        let placed = || plate_px.is_some_and(|p| samples_place_the_plate(&self.robot_m, &self.image_px, &tool_m, &p, max_residual_px));
+        if plate_shift_px > CAMERA_MOVED_PX && self.fitted.is_none() && !placed() {
             tracing::warn!(plate_shift_px, "calibrate: the plate came back elsewhere: a camera moved; visiting the cage again");
             self.robot_m.clear();
             self.image_px.clear();
@@ -288,5 +323,49 @@ mod tests {
         assert_eq!(format!("{:?}", Stage::Fitting { wait, job: None }), "Fitting { wait: Some(MoveWait { seq: 3, sent_frame: 10, settled: 0 }), submitted: None }");
         assert_eq!(format!("{:?}", Stage::Moving { i: 2, wait: None }), "Moving { i: 2, wait: None }");
         assert_eq!(format!("{:?}", Stage::Sampling { i: 1, n: 4 }), "Sampling { i: 1, n: 4 }");
+    }
+
+    /// Two weak-perspective views of the cage (about 1000 px per metre, the right one turned).
+    fn image_of(x: &Vector3<f64>) -> [f64; 4] {
+        [320.0 + 1000.0 * x.y, 240.0 - 1000.0 * x.z + 200.0 * x.x, 300.0 + 900.0 * x.y + 300.0 * x.x, 250.0 - 1000.0 * x.z + 150.0 * x.x]
+    }
+
+    fn cage() -> Vec<Vector3<f64>> {
+        let mut c = Vec::new();
+        for (x, y, z) in [(0.3, -0.1, 0.1), (0.3, 0.1, 0.1), (0.4, 0.1, 0.1), (0.4, -0.1, 0.1), (0.3, -0.1, 0.25), (0.3, 0.1, 0.25), (0.4, 0.1, 0.25), (0.4, -0.1, 0.25)] {
+            c.push(Vector3::new(x, y, z));
+        }
+        c
+    }
+
+    /// Seeds 16 and 26 of the `--disturb` batch: an occluder in calibration, the plate found
+    /// again far from its search base though no camera moved, and the cage visited again for
+    /// nothing. With enough cage points sampled, the plate where they put it keeps the
+    /// samples; a plate off their prediction in one view (a knocked camera), or too few
+    /// points to tell, starts the cage again.
+    #[test]
+    fn a_far_plate_restarts_the_cage_only_where_the_samples_do_not_place_it() {
+        let arm = Vector3::new(0.35, 0.05, 0.2);
+        let here = image_of(&arm);
+        let sampled = |n: usize| {
+            let mut c = Calibrate::new(0);
+            c.robot_m = cage()[..n].to_vec();
+            c.image_px = c.robot_m.iter().map(image_of).collect();
+            c
+        };
+        // Six points sampled, the plate 40 px from its base but where the samples put it.
+        let mut c = sampled(6);
+        assert!(!c.resume(1_000, 100, 40.0, Some(here), arm, 8.0));
+        assert_eq!(c.robot_m.len(), 6, "the samples are kept");
+        // The right view 30 px off (its camera knocked): the cage starts again.
+        let knocked = [here[0], here[1], here[2] + 30.0, here[3]];
+        let mut c = sampled(6);
+        assert!(c.resume(1_000, 100, 40.0, Some(knocked), arm, 8.0));
+        assert!(c.robot_m.is_empty());
+        // Four points (no check on the fit) or no plate: as before, a far plate restarts.
+        assert!(sampled(4).resume(1_000, 100, 40.0, Some(here), arm, 8.0));
+        assert!(sampled(6).resume(1_000, 100, 40.0, None, arm, 8.0));
+        // A near plate never restarts the cage.
+        assert!(!sampled(0).resume(1_000, 100, 5.0, None, arm, 8.0));
     }
 }

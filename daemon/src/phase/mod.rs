@@ -76,7 +76,8 @@ impl PhaseState {
     /// stereo model, the plan and the target's pixels all belong to the camera as it was, so
     /// the cameras are calibrated again and, for a planned target, the scene planned again
     /// (the servo moves its own model with a knocked view instead).
-    pub fn resume(&mut self, m: &mut Mission, now_ns: u64, held_ns: u64, knock: Option<(View, [f64; 2])>, shifts_px: [Option<[f64; 2]>; 4]) -> Resumed {
+    /// `tool_m`: the arm's tool position now (calibration checks a far plate against it).
+    pub fn resume(&mut self, m: &mut Mission, now_ns: u64, held_ns: u64, knock: Option<(View, [f64; 2])>, shifts_px: [Option<[f64; 2]>; 4], tool_m: [f64; 3]) -> Resumed {
         let far = |d: Option<[f64; 2]>| d.map_or(0.0, |d| d[0].hypot(d[1]));
         let plate_px = far(shifts_px[0]).max(far(shifts_px[1]));
         match self {
@@ -90,7 +91,8 @@ impl PhaseState {
                 Resumed::Recalibrate { view, shift_px }
             }
             Self::Calibrate(p) => {
-                if p.resume(now_ns, held_ns, plate_px) {
+                let (now_px, max_residual_px) = (calibrate::plate_px(m), m.cfg.calibration.max_residual_px);
+                if p.resume(now_ns, held_ns, plate_px, now_px, tool_m.into(), max_residual_px) {
                     Resumed::CageAgain { plate_shift_px: plate_px }
                 } else {
                     Resumed::Resumed
@@ -215,7 +217,7 @@ mod tests {
         // The right view's plate came back 60 px away with the arm held: that camera moved.
         let shifts = [None, Some([-58.0, -15.5]), None, None];
         let mut phase = PhaseState::AcquireTarget(acquire_target::AcquireTarget::new(0));
-        let resumed = phase.resume(&mut m, 5_000_000_000, 400_000_000, None, shifts);
+        let resumed = phase.resume(&mut m, 5_000_000_000, 400_000_000, None, shifts, [0.3, 0.0, 0.18]);
         assert_eq!(resumed, Resumed::Recalibrate { view: View::Right, shift_px: [-58.0, -15.5] });
         assert_eq!(phase.phase(), Phase::Calibrate);
         assert!(m.targeting.target().is_none() && m.targeting.alternatives_left() == 0, "the planned target is planned again");
@@ -224,7 +226,7 @@ mod tests {
         assert!(resumed.to_string().contains("right camera moved (plate 60 px away)"), "{resumed}");
         // A few pixels (an arm stopping) is no camera move: the phase goes on.
         let mut phase = PhaseState::Plan(plan::PlanPhase::new(0));
-        let resumed = phase.resume(&mut m, 5_000_000_000, 400_000_000, None, [Some([3.0, 1.0]), None, None, None]);
+        let resumed = phase.resume(&mut m, 5_000_000_000, 400_000_000, None, [Some([3.0, 1.0]), None, None, None], [0.3, 0.0, 0.18]);
         assert_eq!((resumed, phase.phase()), (Resumed::Resumed, Phase::Plan));
     }
 
@@ -233,7 +235,7 @@ mod tests {
         let hint = OperatorHint { version: handeye_wire::hint::HINT_VERSION, left_px: square(100.0), right_px: square(90.0), depth_mm: 30.0, note: String::new() };
         let mut m = mission(Some(&hint));
         let mut phase = PhaseState::AcquireTarget(acquire_target::AcquireTarget::new(0));
-        phase.resume(&mut m, 5_000_000_000, 0, None, [Some([20.0, -30.0]), None, None, None]);
+        phase.resume(&mut m, 5_000_000_000, 0, None, [Some([20.0, -30.0]), None, None, None], [0.3, 0.0, 0.18]);
         assert_eq!(phase.phase(), Phase::Calibrate);
         let t = m.targeting.target().expect("the hint stays the target");
         assert_eq!(t.left_px[0], [120.0, 70.0]);
