@@ -25,6 +25,8 @@ pub mod report;
 pub mod safety;
 pub mod service;
 pub mod stereo_model;
+#[cfg(test)]
+mod test_cameras;
 pub mod servo_plot;
 pub mod timing;
 pub mod track_search;

@@ -8,9 +8,10 @@ use std::path::Path;
 
 use handeye_vision::image::ImageBuf;
 use handeye_wire::{PointingState, Telemetry};
-use nalgebra::{Matrix3, Matrix3x4, Vector3, Vector4};
+use nalgebra::{Matrix3x4, Vector3};
 
 use super::plane::WorkingPlane;
+use crate::test_cameras::{camera, px};
 use super::{ObserveLoop, ObserveOptions};
 use crate::config::DaemonConfig;
 
@@ -18,25 +19,6 @@ const W: usize = 640;
 const H: usize = 480;
 const PLANE_Z_M: f64 = 0.06;
 const PERIOD_NS: u64 = 33_333_333;
-
-/// A pinhole camera at `eye` looking at `at` (z up), 1800 px focal length, 640x480: the
-/// simulator's camera pair.
-fn camera(eye: Vector3<f64>, at: Vector3<f64>) -> Matrix3x4<f64> {
-    let f = (at - eye).normalize();
-    let r = f.cross(&Vector3::z()).normalize();
-    let d = f.cross(&r);
-    let rot = Matrix3::from_rows(&[r.transpose(), d.transpose(), f.transpose()]);
-    let k = Matrix3::new(1800.0, 0.0, 320.0, 0.0, 1800.0, 240.0, 0.0, 0.0, 1.0);
-    let mut rt = Matrix3x4::zeros();
-    rt.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
-    rt.set_column(3, &(-rot * eye));
-    k * rt
-}
-
-fn px(p: &Matrix3x4<f64>, x: &Vector3<f64>) -> [f64; 2] {
-    let h = p * Vector4::new(x.x, x.y, x.z, 1.0);
-    [h[0] / h[2], h[1] / h[2]]
-}
 
 struct Rig {
     cams: [Matrix3x4<f64>; 2],
@@ -119,6 +101,15 @@ struct Stream {
 }
 
 impl Stream {
+    /// Observe mode with `rig`'s plane file and no target, in lockstep with its gesture
+    /// thread.
+    fn new(rig: &Rig) -> Self {
+        let options = ObserveOptions { hint: None, gripper_hint: None, mono: false, epipolar: None, plane: Some(rig.plane_file()) };
+        let mut cfg = DaemonConfig::default();
+        cfg.timing.worker_wait_ms = 5_000;
+        Self { ol: ObserveLoop::new(cfg, options).unwrap(), id: 0, moments: Vec::new(), seen: Vec::new() }
+    }
+
     fn show(&mut self, views: &[ImageBuf; 2], frames: usize) {
         for _ in 0..frames {
             let (l, r) = (views[0].view(), views[1].view());
@@ -139,11 +130,7 @@ fn capture_ns(id: u64) -> u64 {
 #[test]
 fn each_gesture_is_answered_or_refused_once_live_and_watching_goes_on() {
     let rig = Rig::new();
-    let options = ObserveOptions { hint: None, gripper_hint: None, mono: false, epipolar: None, plane: Some(rig.plane_file()) };
-    let mut cfg = DaemonConfig::default();
-    cfg.timing.worker_wait_ms = 5_000;
-    let ol = ObserveLoop::new(cfg, options).unwrap();
-    let mut s = Stream { ol, id: 0, moments: Vec::new(), seen: Vec::new() };
+    let mut s = Stream::new(&rig);
     let table = [scene(1), scene(2)];
     let targets = [Vector3::new(0.40, 0.03, PLANE_Z_M), Vector3::new(0.33, -0.05, PLANE_Z_M)];
     s.show(&table, 5);
@@ -209,11 +196,7 @@ fn with_block(scene: &ImageBuf) -> ImageBuf {
 #[test]
 fn a_scene_changed_for_good_becomes_the_scene_and_a_hand_coming_in_at_the_start_is_not_it() {
     let rig = Rig::new();
-    let options = ObserveOptions { hint: None, gripper_hint: None, mono: false, epipolar: None, plane: Some(rig.plane_file()) };
-    let mut cfg = DaemonConfig::default();
-    cfg.timing.worker_wait_ms = 5_000;
-    let ol = ObserveLoop::new(cfg, options).unwrap();
-    let mut s = Stream { ol, id: 0, moments: Vec::new(), seen: Vec::new() };
+    let mut s = Stream::new(&rig);
     let table = [scene(1), scene(2)];
     let target = Vector3::new(0.40, 0.03, PLANE_Z_M);
     // Observing starts while a hand comes in (each frame a little further): not the scene.

@@ -364,25 +364,7 @@ impl PointPhase {
 mod tests {
     use super::*;
     use handeye_vision::pointing::ImageLine;
-    use nalgebra::{Matrix3x4, Vector4};
-
-    /// A pinhole camera at `eye` looking at `at` (z up), 1800 px focal length, 640x480.
-    fn camera(eye: Vector3<f64>, at: Vector3<f64>) -> Matrix3x4<f64> {
-        let f = (at - eye).normalize();
-        let r = f.cross(&Vector3::z()).normalize();
-        let d = f.cross(&r); // image v downwards
-        let rot = nalgebra::Matrix3::from_rows(&[r.transpose(), d.transpose(), f.transpose()]);
-        let k = nalgebra::Matrix3::new(1800.0, 0.0, 320.0, 0.0, 1800.0, 240.0, 0.0, 0.0, 1.0);
-        let mut rt = Matrix3x4::zeros();
-        rt.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
-        rt.set_column(3, &(-rot * eye));
-        k * rt
-    }
-
-    fn px(p: &Matrix3x4<f64>, x: &Vector3<f64>) -> [f64; 2] {
-        let h = p * Vector4::new(x.x, x.y, x.z, 1.0);
-        [h[0] / h[2], h[1] / h[2]]
-    }
+    use crate::test_cameras::{camera, px};
 
     #[test]
     fn the_plane_maps_carry_finger_lines_to_the_point_on_the_lowest_cage_plane() {
