@@ -3,24 +3,16 @@
 //! and the pick goes on: `tests/e2e_recovery.rs`.)
 
 mod e2e_support;
+mod wire_support;
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use e2e_support::{one_at_a_time, scenario_without_antialias, TempDir};
+use wire_support::Kid;
 use handeye_wire::message::{MessageEvent, MessageSubscriber};
 use handeye_wire::{monotonic_ns, robot_flags, CommandKind, Domain, Phase, RobotCommand, RobotState, Telemetry, WireNode};
-
-/// A child killed (SIGKILL) when the test ends.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 fn handeye(args: &[&str], dir: &Path, name: &str) -> Kid {
     let log = std::fs::File::create(dir.join(format!("{name}.stderr.log"))).unwrap();

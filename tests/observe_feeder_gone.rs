@@ -8,21 +8,11 @@ mod wire_support;
 
 use std::fs::File;
 use std::path::Path;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use wire_support::{handeye, Proc, TempDir, TestDomain};
-
-/// A child killed when the test ends.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use wire_support::{handeye, Kid, Proc, TempDir, TestDomain};
 
 /// The telemetry samples the monitor wrote so far.
 fn samples(path: &Path) -> Vec<Value> {

@@ -34,7 +34,7 @@ mod wire_support;
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use handeye_daemon::observe::plane::WorkingPlane;
@@ -42,7 +42,7 @@ use handeye_sim::glam::DVec3;
 use handeye_sim::render::Renderer;
 use handeye_sim::{Scenario, Simulator};
 use serde_json::Value;
-use wire_support::{handeye, Proc, TempDir, TestDomain};
+use wire_support::{handeye, json_lines, Kid, Proc, TempDir, TestDomain};
 
 /// The daemon's default `[point] park_m` (`handeye_daemon::config::PointSettings`).
 const POINT_PARK_M: [f64; 3] = [0.18, 0.0, 0.14];
@@ -53,20 +53,6 @@ const MAX_ERROR_M: f64 = 0.010;
 const PLANE_FILE: &str = "planes/point_clutter3.toml";
 /// The `--random-layout` seed whose gesture is rendered (see the module docs).
 const LAYOUT_SEED: u64 = 1;
-
-/// A child killed when the test ends.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn json_lines(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path).unwrap().lines().filter(|l| l.starts_with('{')).map(|l| serde_json::from_str(l).unwrap()).collect()
-}
 
 /// What the rendering gave: the PNG folder, the aim point (x, y) and the frames rendered.
 struct Rendered {

@@ -13,31 +13,16 @@ mod wire_support;
 
 use std::collections::HashMap;
 use std::fs::File;
-use std::path::Path;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use wire_support::{handeye, parse_json, Proc, TempDir, TestDomain};
+use wire_support::{handeye, json_lines, parse_json, Kid, Proc, TempDir, TestDomain};
 
 /// Frames the simulator publishes.
 const SIM_FRAMES: u64 = 75;
 /// Largest distance of a tracked corner from the true one, px.
 const MAX_CORNER_ERROR_PX: f64 = 1.5;
-
-/// A child killed when the test ends.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn json_lines(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path).unwrap().lines().filter(|l| l.starts_with('{')).map(|l| serde_json::from_str(l).unwrap()).collect()
-}
 
 fn corners(v: &Value) -> Vec<[f64; 2]> {
     v.as_array().unwrap().iter().map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()]).collect()

@@ -14,7 +14,7 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use wire_support::{handeye, Proc, TempDir, TestDomain};
+use wire_support::{handeye, json_lines, Kid, Proc, TempDir, TestDomain};
 
 /// Frames in the sequence.
 const FRAMES: u64 = 218;
@@ -27,16 +27,6 @@ fn top_face_hint(cube: &Path, dir: &Path) -> PathBuf {
     let path = dir.join("top.json");
     std::fs::write(&path, hint.to_string()).unwrap();
     path
-}
-
-/// A child killed when the test ends.
-struct Kid(std::process::Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 struct Observed {
@@ -80,9 +70,8 @@ fn observe(cube: &Path, drop_every: u64, stem: &str) -> Observed {
         assert!(t0.elapsed() < Duration::from_secs(30), "the monitor did not end after the daemon");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let tel = std::fs::read_to_string(&tel_path).unwrap();
     let tel_err = std::fs::read_to_string(&tel_err_path).unwrap_or_default();
-    let samples: Vec<Value> = tel.lines().filter(|l| l.starts_with('{')).map(|l| serde_json::from_str(l).unwrap()).collect();
+    let samples = json_lines(&tel_path);
     let frames: Vec<Value> = samples.into_iter().filter(|s| s["frame_id"].is_u64()).collect();
     assert!(!frames.is_empty(), "no telemetry: {tel_err}");
     let report: Value = serde_json::from_str(&std::fs::read_to_string(out.join("observe.json")).unwrap()).unwrap();

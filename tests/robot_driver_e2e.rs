@@ -17,8 +17,10 @@
 //! closed, and every command answered by the driver with the flags the daemon relies on (no
 //! refusal, no watchdog stop) — checked from the wire by a third subscriber.
 
+mod wire_support;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -28,14 +30,17 @@ use handeye_sim::Scenario;
 use handeye_wire::domain::remove_domain_files;
 use handeye_wire::message::MessageSubscriber;
 use handeye_wire::{robot_flags as f, CommandKind, Domain, GripperCommand, RobotCommand, RobotState, WireNode};
+use wire_support::Kid;
 
-/// The example binary, built here when `cargo test` has not built it (it builds examples
+/// The example binary, built here (`cargo test` builds examples
 /// only for the packages it tests).
 fn driver_binary() -> PathBuf {
     let exe = std::env::current_exe().unwrap();
     let profile_dir = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
     let bin = profile_dir.join("examples").join("robot_driver");
-    if !bin.is_file() {
+    // Built every time, not only when missing: cargo makes it a no-op when the example is up
+    // to date, and a binary left from before a wire-layout change fails as "malformed".
+    {
         let mut build = Command::new(env!("CARGO"));
         build.args(["build", "-p", "handeye-wire", "--example", "robot_driver", "--target-dir"]);
         build.arg(profile_dir.parent().unwrap());
@@ -67,22 +72,12 @@ impl Drop for DomainFiles {
     }
 }
 
-/// A child process killed on drop (a failing test leaves nothing running).
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn spawn(name: &'static str, cmd: &mut Command, dir: &Path) -> Proc {
+fn spawn(name: &'static str, cmd: &mut Command, dir: &Path) -> Kid {
     let log = std::fs::File::create(dir.join(format!("{name}.stderr.log"))).unwrap();
-    Proc(cmd.stdout(Stdio::piped()).stderr(log).spawn().unwrap_or_else(|e| panic!("starting {name}: {e}")))
+    Kid(cmd.stdout(Stdio::piped()).stderr(log).spawn().unwrap_or_else(|e| panic!("starting {name}: {e}")))
 }
 
-fn wait_exit(p: &mut Proc, timeout: Duration) -> Option<std::process::ExitStatus> {
+fn wait_exit(p: &mut Kid, timeout: Duration) -> Option<std::process::ExitStatus> {
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(s) = p.0.try_wait().unwrap() {
@@ -95,7 +90,7 @@ fn wait_exit(p: &mut Proc, timeout: Duration) -> Option<std::process::ExitStatus
     }
 }
 
-fn interrupt(p: &Proc) {
+fn interrupt(p: &Kid) {
     // SAFETY: kill(2) on a child this test spawned and has not reaped.
     unsafe { libc::kill(p.0.id() as i32, libc::SIGINT) };
 }

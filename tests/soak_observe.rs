@@ -25,14 +25,14 @@ mod soak_support;
 mod wire_support;
 
 use std::path::Path;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use handeye_wire::message::MessageSubscriber;
 use handeye_wire::{Telemetry, WireNode};
 use serde_json::Value;
 use soak_support::{domain_files, percentile, sample_proc, ProcSample};
-use wire_support::{Proc, TempDir, TestDomain};
+use wire_support::{Kid, Proc, TempDir, TestDomain};
 
 /// Frames per session: two seconds of a 30 frames/s camera.
 const FRAMES_PER_SESSION: u32 = 60;
@@ -59,15 +59,6 @@ fn handeye(domain: &TestDomain) -> std::process::Command {
     let mut c = std::process::Command::new(bin);
     c.env("HANDEYE_DOMAIN", domain.name()).env("HANDEYE_LOG", "warn").env_remove("IOX2_LOG_LEVEL");
     c
-}
-
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 fn reason(t: &Telemetry) -> String {

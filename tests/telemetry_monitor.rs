@@ -6,21 +6,11 @@ mod e2e_support;
 mod wire_support;
 
 use std::fs::File;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use wire_support::{handeye, TempDir, TestDomain};
-
-/// A child killed when the test ends.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use wire_support::{handeye, Kid, TempDir, TestDomain};
 
 const PHASES: [&str; 8] = ["acquire_gripper", "calibrate", "plan", "acquire_target", "servo", "grasp", "lift", "done"];
 

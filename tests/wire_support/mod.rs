@@ -189,3 +189,24 @@ pub fn parse_json(stdout: &str) -> serde_json::Value {
     let line = stdout.lines().rev().find(|l| l.starts_with('{')).unwrap_or_else(|| panic!("no JSON in stdout:\n{stdout}"));
     serde_json::from_str(line).unwrap_or_else(|e| panic!("bad JSON ({e}): {line}"))
 }
+
+/// A child process SIGKILLed and reaped when dropped, so a test that fails (or panics) leaves
+/// no simulator, daemon or feeder running. For one whose stderr the test reads, see [`Proc`].
+pub struct Kid(pub Child);
+
+impl Drop for Kid {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The JSON objects of a log with one per line (`monitor --telemetry`, the gesture log);
+/// other lines (a header, a progress message) are skipped.
+pub fn json_lines(path: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    text.lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{}: a line is not JSON ({e}): {l}", path.display())))
+        .collect()
+}
