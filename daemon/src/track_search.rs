@@ -127,21 +127,24 @@ impl ShiftSearch {
     }
 }
 
+/// A scene for the search's tests and observe's watch tests: a dark 40 px square on a light
+/// 320x240 image, its top-left corner at (60 + dx, 60 + dy).
+#[cfg(test)]
+pub(crate) fn square_at(dx: usize, dy: usize) -> handeye_vision::image::ImageBuf {
+    let mut img = handeye_vision::image::ImageBuf::filled(320, 240, 200);
+    for y in 60 + dy..100 + dy {
+        for x in 60 + dx..100 + dx {
+            img.set(x, y, 50);
+        }
+    }
+    img
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use handeye_vision::image::ImageBuf;
     use handeye_vision::tracker::TrackerConfig;
-
-    fn square_at(dx: usize, dy: usize) -> ImageBuf {
-        let mut img = ImageBuf::filled(320, 240, 200);
-        for y in 60 + dy..100 + dy {
-            for x in 60 + dx..100 + dx {
-                img.set(x, y, 50);
-            }
-        }
-        img
-    }
 
     #[test]
     fn a_square_that_jumped_is_found_near_the_predicted_shift() {

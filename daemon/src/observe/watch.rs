@@ -234,16 +234,7 @@ mod tests {
     use super::*;
     use handeye_vision::image::ImageBuf;
     use handeye_vision::tracker::TrackerConfig;
-
-    fn square_at(dx: usize, dy: usize) -> ImageBuf {
-        let mut img = ImageBuf::filled(320, 240, 200);
-        for y in 60 + dy..100 + dy {
-            for x in 60 + dx..100 + dx {
-                img.set(x, y, 50);
-            }
-        }
-        img
-    }
+    use crate::track_search::square_at;
 
     #[test]
     fn a_contour_is_acquired_lost_while_hidden_and_found_again_where_it_reappears() {
