@@ -99,6 +99,9 @@ fn main() {
     if let Some(v) = env("TRACKER_MAX_RIVAL_UPDATES") {
         config.max_rival_updates = v as usize;
     }
+    if let Some(v) = env("TRACKER_MIN_SHAPE_SUPPORT_POINTS") {
+        config.min_shape_support_points = v as usize;
+    }
     if let Some(v) = env("TRACKER_REFINE_SKIP_PX") {
         config.refine_skip_px = v;
     }
