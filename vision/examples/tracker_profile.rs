@@ -18,8 +18,9 @@
 //! px off the annotated corners on an annotated frame while `tracking`) and the runs lost;
 //! `TRACKER_VERDICTS=FILE` writes a line per run, `TRACKER_BASELINE=FILE` (another build's
 //! verdicts) lists the runs that build tracked to the end and this one reports lost, and
-//! `TRACKER_TRACE=top|left,dx,dy,scale` prints one run frame by frame. `TRACKER_<FIELD>`
-//! overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
+//! `TRACKER_TRACE=top|left,dx,dy,scale` prints one run frame by frame (with
+//! `TRACKER_OVERLAY=DIR,FROM,TO`, PNG crops of frames FROM..=TO with the contour and its
+//! edges). `TRACKER_<FIELD>` overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
 //!
 //! ```text
 //! TRACKER_GRID=wide TRACKER_VERDICTS=/tmp/after.txt TRACKER_BASELINE=/tmp/before.txt \
@@ -97,6 +98,9 @@ fn main() {
     }
     if let Some(v) = env("TRACKER_MAX_RIVAL_UPDATES") {
         config.max_rival_updates = v as usize;
+    }
+    if let Some(v) = env("TRACKER_MIN_SHAPE_SUPPORT_POINTS") {
+        config.min_shape_support_points = v as usize;
     }
     if let Some(v) = env("TRACKER_REFINE_SKIP_PX") {
         config.refine_skip_px = v;
@@ -459,6 +463,7 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
     let num = |s: &str| s.parse::<f64>().expect("TRACKER_TRACE: a number");
     let (corners, truth): (&[[f64; 2]; 4], &Truth) = if face == "top" { (&TOP, &TRUTH) } else { (&LEFT, &LEFT_FACE_TRUTH) };
     let mut tracker = ContourTracker::new(config, &place(corners, num(dx), num(dy), num(scale))).unwrap();
+    let overlay = parse_overlay();
     for (k, frame) in frames.iter().enumerate() {
         let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { 1.0 / 30.0 });
         let (streak, side, offset, turn) = tracker.rival_streak();
@@ -475,9 +480,71 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
                 corners.join(" ")
             );
         }
+        if let Some((dir, from, to)) = &overlay
+            && (*from..=*to).contains(&k)
+        {
+            write_overlay(dir, k, &frames[k], &tracker, truth.iter().find(|(f, _)| *f == k).map(|(_, t)| t));
+        }
         if !state.is_tracking() {
             println!("{:?}", state.lost_reason());
             break;
         }
     }
+}
+
+/// `TRACKER_OVERLAY=DIR,FROM,TO` with `TRACKER_TRACE`: the frames FROM..=TO as PNG crops
+/// around the contour, 4x: the contour (red), each point's edges of the last pass (blue; the
+/// one the fit chose green) and the annotated corners (yellow) where there are some.
+fn parse_overlay() -> Option<(PathBuf, usize, usize)> {
+    let spec = std::env::var("TRACKER_OVERLAY").ok()?;
+    let parts: Vec<&str> = spec.split(',').collect();
+    let [dir, from, to] = parts[..] else { panic!("TRACKER_OVERLAY: DIR,FROM,TO") };
+    let dir = PathBuf::from(dir);
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    Some((dir, from.parse().expect("TRACKER_OVERLAY: FROM"), to.parse().expect("TRACKER_OVERLAY: TO")))
+}
+
+fn write_overlay(dir: &Path, k: usize, frame: &ImageBuf, tracker: &ContourTracker, truth: Option<&[[f64; 2]; 4]>) {
+    const ZOOM: f64 = 4.0;
+    let corners: Vec<Vector2<f64>> = tracker.corners().collect();
+    let (mut lo, mut hi) = (corners[0], corners[0]);
+    for c in &corners {
+        lo = lo.inf(c);
+        hi = hi.sup(c);
+    }
+    let (x0, y0) = ((lo.x - 20.0).max(0.0).floor(), (lo.y - 20.0).max(0.0).floor());
+    let (x1, y1) = ((hi.x + 20.0).min(frame.view().width() as f64 - 1.0).ceil(), (hi.y + 20.0).min(frame.view().height() as f64 - 1.0).ceil());
+    let (w, h) = (((x1 - x0) * ZOOM) as u32, ((y1 - y0) * ZOOM) as u32);
+    let mut out = image::RgbImage::new(w, h);
+    for (x, y, px) in out.enumerate_pixels_mut() {
+        let g = frame.get((x0 + f64::from(x) / ZOOM) as usize, (y0 + f64::from(y) / ZOOM) as usize);
+        *px = image::Rgb([g, g, g]);
+    }
+    let mut dot = |p: Vector2<f64>, colour: [u8; 3], r: i64| {
+        let (cx, cy) = (((p.x + 0.5 - x0) * ZOOM) as i64, ((p.y + 0.5 - y0) * ZOOM) as i64);
+        for yy in cy - r..=cy + r {
+            for xx in cx - r..=cx + r {
+                if xx >= 0 && yy >= 0 && (xx as u32) < w && (yy as u32) < h {
+                    out.put_pixel(xx as u32, yy as u32, image::Rgb(colour));
+                }
+            }
+        }
+    };
+    for i in 0..corners.len() {
+        let (a, b) = (corners[i], corners[(i + 1) % corners.len()]);
+        for s in 0..200 {
+            dot(a + (b - a) * (f64::from(s) / 200.0), [255, 0, 0], 0);
+        }
+    }
+    for line in tracker.search_lines() {
+        for (j, c) in line.candidates.iter().enumerate() {
+            let colour = if Some(j) == line.chosen { [0, 255, 0] } else { [0, 128, 255] };
+            dot(line.point + line.normal * f64::from(c.h_px), colour, 1);
+        }
+    }
+    for t in truth.into_iter().flatten() {
+        dot(Vector2::new(t[0], t[1]), [255, 255, 0], 3);
+    }
+    let file = dir.join(format!("frame{k:03}.png"));
+    out.save(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
 }

@@ -141,3 +141,31 @@ fn the_left_face_is_tracked_within_4_px_or_its_shear_is_reported_lost() {
         eprintln!("{run}: {outcome} (worst annotated corner error while tracking {worst:.2} px)");
     }
 }
+
+/// The wide grid's three frame-150 slides (issue 18 item 5): from frame 147 the top face's
+/// side 2 turns onto the right face's silhouette and side 0 onto a texture line while side 3
+/// slides along itself, 12.2-12.7 px off on frame 150 with the default settings. The
+/// experimental `min_shape_support_points` (a wide pass's change of shape kept only where it
+/// does not explain fewer edges than the predicted shape) holds the face through them.
+#[test]
+fn the_top_faces_frame_150_slides_are_held_when_the_wide_pass_may_keep_the_predicted_shape() {
+    let Some(dir) = data_support::visp_cube(&["image0000.png", "image0160.png"]) else { return };
+    let frames: Vec<ImageBuf> = (0..=160).map(|k| load(&dir, k)).collect();
+    let starts = [(100, [1.0, 3.0]), (104, [-2.0, 2.0]), (104, [-2.0, 3.0])];
+    for (points, [dx, dy]) in starts {
+        let config = TrackerConfig { points, corner_margin: 0.065, min_shape_support_points: 3, ..TrackerConfig::default() };
+        let start: Vec<[f64; 2]> = TOP_FACE_FRAME0.iter().map(|c| [c[0] + dx, c[1] + dy]).collect();
+        let mut tracker = ContourTracker::new(config, &start).unwrap();
+        let run = format!("top face, {points} points, margin 0.065, start ({dx}, {dy}) px off");
+        for (k, frame) in frames.iter().enumerate() {
+            let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { 1.0 / 30.0 });
+            assert!(state.is_tracking(), "{run}: lost at frame {k}: {state:?}");
+            if let Some((_, truth)) = GROUND_TRUTH.iter().find(|(f, _)| *f == k && *f > 0) {
+                for (j, (c, t)) in tracker.corners().zip(truth).enumerate() {
+                    let err = (c - Vector2::new(t[0], t[1])).norm();
+                    assert!(err < 4.0, "{run}: corner {j} {err:.1} px off the annotation on frame {k}");
+                }
+            }
+        }
+    }
+}

@@ -5,7 +5,7 @@ use nalgebra::{Matrix2, Vector2};
 use super::config::{TrackerConfigError, EdgeSign, TrackerConfig};
 use super::contour::{Template, TemplateError};
 use super::filter::PredictiveFilter;
-use super::fit::{fit_motion, FitBuffers, FitPoints, FitSettings, FitSide};
+use super::fit::{fit_motion, DeformationModel, FitBuffers, FitPoints, FitSettings, FitSide};
 use super::frame::{TemplateFrame, Placement};
 use super::batch::{ContourSearch, SearchSettings};
 use super::search::{Appearance, Candidate, PointEdges, SideGeometry, SignRule};
@@ -103,6 +103,17 @@ pub struct ContourTracker {
     /// Updates whose wide pass saw a rival edge outnumber its side's, less those that did not
     /// (never below 0; see `TrackerConfig::max_rival_updates`).
     rival_updates: usize,
+}
+
+/// What one search and fit found.
+struct PassResult {
+    /// The fitted placement.
+    moved: Placement,
+    /// How far it moved the farthest corner, px.
+    moved_px: f64,
+    /// The same edges fitted with the predicted shape held, where that puts more of the points
+    /// on an edge (see [`ContourTracker::pass`]).
+    held: Option<Placement>,
 }
 
 /// Every `stride`-th of a side's `count` points, centred on the side: the first one's index
@@ -237,16 +248,18 @@ impl ContourTracker {
         }
         let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s } else { 0.0 };
         let predicted = self.filter.predict(&self.placement, dt_s);
+
+
         let mut current = predicted;
         // Optionally a short search around the prediction first, kept when it barely moves
         // the contour (see `TrackerConfig::short_first_px`).
         let mut settled = false;
         if self.config.short_first_px > 0.0 && self.updates > 0 {
             let (search_px, iterations) = (self.config.refine_search_px, self.config.refine_iterations);
-            if let Some((moved, moved_px)) = self.pass(image, &current, search_px, 1, iterations)
-                && moved_px < self.config.short_first_px
+            if let Some(out) = self.pass(image, &current, search_px, 1, iterations, false)
+                && out.moved_px < self.config.short_first_px
             {
-                (current, settled) = (moved, true);
+                (current, settled) = (out.moved, true);
             }
         }
         let passes = if settled { 0 } else { self.config.passes };
@@ -260,18 +273,30 @@ impl ContourTracker {
             // wide range: with `coarse_stride` > 1 a subset of the points does that (the last
             // pass always searches them all).
             let stride = if pass == 0 && passes > 1 { self.config.coarse_stride } else { 1 };
-            let Some((moved, moved_px)) = self.pass(image, &current, search_px, stride, iterations) else {
+            // A wide pass followed by another also tries the predicted shape (see
+            // `TrackerConfig::min_shape_support_points`).
+            let try_held = pass + 1 < passes && self.config.min_shape_support_points > 0;
+            let Some(out) = self.pass(image, &current, search_px, stride, iterations, try_held) else {
                 self.state = TrackState::Lost(LostReason::NotFinite);
                 self.updates += 1;
                 return self.state;
             };
             if pass == 0 && stride == 1 && self.config.max_rival_updates > 0 {
-                self.find_rival(&moved);
+                self.find_rival(out.held.as_ref().unwrap_or(&out.moved));
             }
-            current = moved;
+            if let Some(held) = out.held {
+                let Some(chosen) = self.better_refined(image, held, out.moved, pass + 1, passes) else {
+                    self.state = TrackState::Lost(LostReason::NotFinite);
+                    self.updates += 1;
+                    return self.state;
+                };
+                current = chosen;
+                break;
+            }
+            current = out.moved;
             // A pass that barely moved any corner would be searched again at the same places:
             // skip the remaining passes (not after a subset: the checks need every point).
-            if stride == 1 && moved_px < self.config.refine_skip_px {
+            if stride == 1 && out.moved_px < self.config.refine_skip_px {
                 break;
             }
         }
@@ -295,8 +320,10 @@ impl ContourTracker {
         self.state
     }
 
-    /// One search and fit from `placement`: the moved placement and how far it moved the
-    /// farthest corner, px (`None` when the fit is not finite).
+    /// One search and fit from `placement` (`None` when the fit is not finite). With
+    /// `try_held`, the same edges are also fitted with the shape `placement` predicts held
+    /// (translation only): [`PassResult::held`] when that puts at least
+    /// `min_shape_support_points` more of the points on an edge than the full fit.
     fn pass(
         &mut self,
         image: &ImageView<'_>,
@@ -304,7 +331,8 @@ impl ContourTracker {
         search_px: f64,
         stride: usize,
         iterations: usize,
-    ) -> Option<(Placement, f64)> {
+        try_held: bool,
+    ) -> Option<PassResult> {
         let searched = self.search(image, placement, search_px, stride);
         let settings = FitSettings {
             model: self.config.model,
@@ -318,34 +346,106 @@ impl ContourTracker {
         let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
         let fit = fit_motion(&points, &settings, &mut self.fit);
         let moved = placement.moved(fit.t, fit.a, fit.g, placement.frame.origin)?;
+        let mut held = None;
+        if try_held {
+            let rigid = FitSettings { model: DeformationModel::None, ..settings };
+            let points = FitPoints { px: &self.rel_x[..searched], py: &self.rel_y[..searched], sides: &self.fit_sides };
+            let fit = fit_motion(&points, &rigid, &mut self.fit);
+            if let Some(kept) = placement.moved(fit.t, fit.a, fit.g, placement.frame.origin) {
+                let band_px = 0.5 * self.config.inlier_px;
+                let deformed_support = self.support(&moved, searched, band_px);
+                let kept_support = self.support(&kept, searched, band_px);
+                if kept_support >= deformed_support + self.config.min_shape_support_points {
+                    held = Some(kept);
+                }
+            }
+        }
         let moved_px = self
             .template
             .corners()
             .iter()
             .map(|c| (moved.image_from_template(*c) - placement.image_from_template(*c)).norm())
             .fold(0.0, f64::max);
-        Some((moved, moved_px))
+        Some(PassResult { moved, moved_px, held })
     }
 
-    /// After a wide pass: the strongest rival edge of any side (see
-    /// [`strongest_rival`](super::wrong_lock::strongest_rival)).
-    fn find_rival(&mut self, moved: &Placement) {
+    /// Passes `from..passes` (the refinement passes) from `start`: where they put the contour.
+    fn refine(&mut self, image: &ImageView<'_>, start: Placement, from: usize, passes: usize) -> Option<Placement> {
+        let mut current = start;
+        for _ in from..passes {
+            let (search_px, iterations) = (self.config.refine_search_px, self.config.refine_iterations);
+            let out = self.pass(image, &current, search_px, 1, iterations, false)?;
+            current = out.moved;
+            if out.moved_px < self.config.refine_skip_px {
+                break;
+            }
+        }
+        Some(current)
+    }
+
+    /// A wide pass whose change of shape explained fewer edges than the predicted shape: the
+    /// refinement passes from both, and the held one only where it ends with
+    /// `min_shape_support_points` more of the points on an edge (else the full fit's: the
+    /// plain tracker's choice). The wide pass's count alone held the shape through the real
+    /// sequence's fast turn at its end in 6 of the wide grid's 495 top-face starts (a contour
+    /// then wrong keeps its wrong shape, 24-28 px off); compared after the refinement, in 4:
+    /// why the setting is off. The buffers are left with the chosen one's last pass.
+    fn better_refined(
+        &mut self,
+        image: &ImageView<'_>,
+        held: Placement,
+        moved: Placement,
+        from: usize,
+        passes: usize,
+    ) -> Option<Placement> {
         let n = self.template.points().len();
-        // Where each point's search line meets its side as fitted (a side stays straight
-        // under the placement): `p + d n` on the line through `a` along `t`.
+        let band_px = 0.5 * self.config.inlier_px;
+        let from_held = self.refine(image, held, from, passes).map(|p| self.support(&p, n, band_px));
+        let from_moved = self.refine(image, moved, from, passes)?;
+        let moved_support = self.support(&from_moved, n, band_px);
+        let margin = self.config.min_shape_support_points;
+        match from_held {
+            // Again, to leave its search and fit in the buffers for the checks and learning.
+            Some(held_support) if held_support >= moved_support + margin => self.refine(image, held, from, passes),
+            _ => Some(from_moved),
+        }
+    }
+
+    /// Where each searched point's search line meets its side under `placement`, into
+    /// `fitted_px` (the same axis as its candidates' `h_px`; a side stays straight under the
+    /// placement: `p + d n` on the line through `a` along `t`).
+    fn fitted_offsets(&mut self, placement: &Placement, searched: usize) {
         self.fitted_px.clear();
-        self.fitted_px.resize(n, 0.0);
+        self.fitted_px.resize(searched, f64::INFINITY);
         let cross = |u: Vector2<f64>, v: Vector2<f64>| u.x * v.y - u.y * v.x;
-        for edge in self.template.edges.iter().filter(|e| e.count > 0) {
-            let a = moved.image_from_template(edge.start);
-            let t = moved.image_from_template(edge.start + edge.tangent) - a;
-            for i in edge.first..edge.first + edge.count {
+        for (edge, side) in self.template.edges.iter().zip(&self.fit_sides).filter(|(_, s)| s.count > 0) {
+            let a = placement.image_from_template(edge.start);
+            let t = placement.image_from_template(edge.start + edge.tangent) - a;
+            for i in side.first..side.first + side.count {
                 let (p, normal) = (Vector2::new(self.pos_x[i], self.pos_y[i]), Vector2::new(self.nrm_x[i], self.nrm_y[i]));
                 let along = cross(t, normal);
                 // A side turned edge-on to its old normal has no offset: far outside any band.
                 self.fitted_px[i] = if along.abs() > 1e-9 * t.norm() { cross(t, a - p) / along } else { f64::INFINITY };
             }
         }
+    }
+
+    /// How many of the searched points found an edge within `band_px` of the contour placed
+    /// at `placement`.
+    fn support(&mut self, placement: &Placement, searched: usize, band_px: f64) -> usize {
+        self.fitted_offsets(placement, searched);
+        self.edges[..searched]
+            .iter()
+            .zip(&self.fitted_px)
+            .filter(|(e, f)| e.as_slice().iter().any(|c| (f64::from(c.h_px) - **f).abs() <= band_px))
+            .count()
+    }
+
+    /// After a wide pass: the strongest rival edge of any side (see
+    /// [`strongest_rival`](super::wrong_lock::strongest_rival)).
+    fn find_rival(&mut self, moved: &Placement) {
+        let n = self.template.points().len();
+        self.fitted_offsets(moved, n);
         let band_px = 0.5 * self.config.inlier_px;
         self.rival = super::wrong_lock::strongest_rival(
             &self.template.edges,
