@@ -33,7 +33,9 @@ use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
+mod request;
 pub use pixels::{bottom_edge_offset, edge_support, mask_and_fill};
+pub use request::{plan_request, replay_request, PlanMoment, ReplayError};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -239,6 +241,10 @@ pub struct PlanInputs {
     pub cage_image_px: Vec<[f64; 4]>,
     #[serde(default)]
     pub lever_m: Option<[f64; 3]>,
+    /// Features entirely above this height were taken for the arm, m (the parked tool's
+    /// height less the clearance). Absent in older reports.
+    #[serde(default)]
+    pub max_height_m: Option<f64>,
 }
 
 /// The stereo geometry the planner used.
@@ -441,6 +447,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             cage_robot_m: req.calibration.cage_robot_m.iter().map(arr3).collect(),
             cage_image_px: req.calibration.cage_image_px.clone(),
             lever_m: Some(req.calibration.lever_m),
+            max_height_m: Some(req.scene.max_height_m),
             ..Default::default()
         },
         ..Default::default()
@@ -802,7 +809,7 @@ mod json_shape_tests {
         let mut expected = vec![
             "segments", "matches", "planes", "facets", "candidates", "chosen", "rejected_sites", "rejected_by_reason",
             "facet_rejections", "superseded_facets", "image_rear_edges", "indicated_m", "indicated_px", "masks_px", "masked_px",
-            "cage_robot_m", "cage_image_px", "lever_m",
+            "cage_robot_m", "cage_image_px", "lever_m", "max_height_m",
             "model", "bootstrap_rms_px", "projective_residual_px", "planner_ms", "total_ms",
         ];
         expected.sort_unstable();
@@ -818,7 +825,7 @@ mod json_shape_tests {
         assert_eq!(serde_json::to_value(&back).unwrap(), value);
         // Reports written before the cage was kept still read.
         let mut old = value.clone();
-        for key in ["cage_robot_m", "cage_image_px", "lever_m"] {
+        for key in ["cage_robot_m", "cage_image_px", "lever_m", "max_height_m"] {
             old.as_object_mut().unwrap().remove(key);
         }
         assert!(serde_json::from_value::<PlanSummary>(old).is_ok());
