@@ -33,6 +33,7 @@ use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 mod pixels;
+mod rear_edge;
 mod request;
 pub use pixels::{bottom_edge_offset, edge_support, mask_and_fill};
 pub use request::{plan_request, replay_request, PlanMoment, ReplayError};
@@ -338,9 +339,8 @@ fn to_tracker_px(p: [f64; 2]) -> [f64; 2] {
 /// it). A block's top face is horizontal at its front face's top edge; its far edge is a
 /// line at that height, parallel to the top edge, some depth behind it, that both images
 /// show as a step (the top face is lit, what lies behind is not the same grey). Depths from
-/// `MIN_DEPTH_M` to `MAX_DEPTH_M` are tried in 1 mm steps: past the front edge's own step
-/// (support under 0.3), the first with edge support of at least `MIN_SUPPORT` in both views
-/// is taken, moved on while the support grows. The edge
+/// `MIN_DEPTH_M` to the widest grasp plus 5 mm are tried in 1 mm steps, and the far edge is
+/// the strongest step past the front edge's own ([`rear_edge::far_edge`]). The edge
 /// joins the face's object, and a top face with that outline supersedes planner facets of
 /// the object it covers in both views (misplaced, they would stand in the fingers' way).
 /// Returns how many edges were added.
@@ -350,11 +350,13 @@ fn rear_edges_from_image(
     images: &[ImageBuf; 2],
     indicated: &Vector3<f64>,
     max_distance_m: f64,
+    max_width_m: f64,
     summary: &mut PlanSummary,
 ) -> usize {
     const MIN_DEPTH_M: f64 = 0.008;
-    const MAX_DEPTH_M: f64 = 0.055;
-    const MIN_SUPPORT: f64 = 0.7;
+    // A far edge deeper than the widest grasp (plus the reconstruction's few millimetres)
+    // could not be grasped across anyway.
+    let max_depth_m = max_width_m + 0.005;
     let toward = ps.scene.toward_viewer;
     let mut added = Vec::new();
     for (k, f) in ps.scene.facets.iter().enumerate() {
@@ -379,25 +381,26 @@ fn rear_edges_from_image(
         let Some((a, b)) = top else { continue };
         // Along the edge's middle 70 % (its ends meet other faces' edges).
         let (a_in, b_in) = (a + 0.15 * (b - a), b - 0.15 * (b - a));
-        let support_at = |d: f64| {
+        let sample_at = |d: f64| {
             let (pa, pb) = (project(&(a_in + back * d)), project(&(b_in + back * d)));
-            edge_support(&images[0], pa[0], pb[0]).min(edge_support(&images[1], pa[1], pb[1]))
-        };
-        let steps = ((MAX_DEPTH_M - MIN_DEPTH_M) * 1e3).round() as usize;
-        let depths: Vec<f64> = (0..=steps).map(|i| MIN_DEPTH_M + i as f64 * 1e-3).collect();
-        // Past the front edge first (its step reaches a few pixels back: the top face is
-        // foreshortened), then the first line both views show.
-        let Some(clear) = depths.iter().position(|&d| support_at(d) < 0.3) else { continue };
-        let Some(first) = depths.iter().skip(clear).position(|&d| support_at(d) >= MIN_SUPPORT).map(|i| i + clear) else { continue };
-        let mut best = (depths[first], support_at(depths[first]));
-        for &d in &depths[first + 1..] {
-            let s = support_at(d);
-            if s < best.1 {
-                break;
+            let (fa, fb) = (project(&a_in), project(&b_in));
+            let offset = |k: usize| ((pa[k][0] + pb[k][0] - fa[k][0] - fb[k][0]) / 2.0).hypot((pa[k][1] + pb[k][1] - fa[k][1] - fb[k][1]) / 2.0);
+            rear_edge::DepthSample {
+                support: edge_support(&images[0], pa[0], pb[0]).min(edge_support(&images[1], pa[1], pb[1])),
+                strength_grey: pixels::edge_strength(&images[0], pa[0], pb[0]).min(pixels::edge_strength(&images[1], pa[1], pb[1])),
+                offset_px: offset(0).min(offset(1)),
             }
-            best = (d, s);
-        }
-        let (d, support) = best;
+        };
+        let steps = ((max_depth_m - MIN_DEPTH_M) * 1e3).round().max(0.0) as usize;
+        let depths: Vec<f64> = (0..=steps).map(|i| MIN_DEPTH_M + i as f64 * 1e-3).collect();
+        let profile: Vec<rear_edge::DepthSample> = depths.iter().map(|&d| sample_at(d)).collect();
+        tracing::debug!(
+            plan_facet = ps.facets[k].plan_facet,
+            profile = ?depths.iter().zip(&profile).map(|(d, s)| format!("{:.0}mm {:.1}px s{:.2} g{:.0}", d * 1e3, s.offset_px, s.support, s.strength_grey)).collect::<Vec<_>>(),
+            "rear-edge profile"
+        );
+        let Some(i) = rear_edge::far_edge(&profile) else { continue };
+        let (d, support) = (MIN_DEPTH_M + i * 1e-3, profile[i.round() as usize].support);
         let (ra, rb) = (a + back * d, b + back * d);
         let top_face = [a, b, rb, ra].map(|p| project(&p));
         added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, d, support));
@@ -624,7 +627,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         && !grasps.candidates.iter().any(|g| near_point(g, &p) && g.site.width_m >= MIN_SOLID_WIDTH_M)
     {
         let project = |q: &Vector3<f64>| project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, q);
-        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.scene.max_distance_m, &mut summary);
+        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.scene.max_distance_m, req.grasp.gripper.max_width_m, &mut summary);
         if found > 0
             && let Ok(g) = plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp)
         {
