@@ -342,7 +342,8 @@ fn to_tracker_px(p: [f64; 2]) -> [f64; 2] {
 /// `MIN_DEPTH_M` to the widest grasp plus 5 mm are tried in 1 mm steps, and the far edge is
 /// the strongest step past the front edge's own ([`rear_edge::far_edge`]). The edge
 /// joins the face's object, and a top face with that outline supersedes planner facets of
-/// the object it covers in both views (misplaced, they would stand in the fingers' way).
+/// the object it covers in both views (misplaced, they would stand in the fingers' way) or
+/// that stand above it over its footprint ([`rear_edge::stands_above_top`]).
 /// Returns how many edges were added.
 fn rear_edges_from_image(
     ps: &mut handeye_vision::grasp::PlannedScene,
@@ -403,23 +404,19 @@ fn rear_edges_from_image(
         let (d, support) = (MIN_DEPTH_M + i * 1e-3, profile[i.round() as usize].support);
         let (ra, rb) = (a + back * d, b + back * d);
         let top_face = [a, b, rb, ra].map(|p| project(&p));
-        added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, d, support));
+        added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, [a, b, rb, ra], d, support));
     }
     let count = added.len();
     let mut drop = vec![false; ps.scene.facets.len()];
-    for (k, component, segment, top_face, d, support) in added {
+    for (k, component, segment, top_face, top_m, d, support) in added {
         summary.scene.image_rear_edges.push((ps.facets[k].plan_facet, d * 1e3, support));
         ps.scene.edges.push(handeye_vision::grasp::SceneEdge { segment, component });
         ps.edge_matches.push(IMAGE_REAR_EDGE);
         let left: Vec<[f64; 2]> = top_face.iter().map(|p| [p[0][0] + PLANNER_FROM_TRACKER_PX, p[0][1] + PLANNER_FROM_TRACKER_PX]).collect();
         let right: Vec<[f64; 2]> = top_face.iter().map(|p| [p[1][0] + PLANNER_FROM_TRACKER_PX, p[1][1] + PLANNER_FROM_TRACKER_PX]).collect();
         for (j, (src, facet)) in ps.facets.iter().zip(&ps.scene.facets).enumerate() {
-            if j != k
-                && !src.hypothesised
-                && facet.component == component
-                && geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
-                && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
-            {
+            let covered = geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE;
+            if j != k && !src.hypothesised && facet.component == component && (covered || rear_edge::stands_above_top(&facet.polygon_m, &top_m)) {
                 drop[j] = true;
             }
         }

@@ -156,3 +156,70 @@ mod plateau_tests {
         assert_eq!(far_edge(&p), Some(3.5));
     }
 }
+
+/// How far above a top face found in the images another facet of its object may stand over
+/// the face's footprint before it is taken for a false match, m: the bound the plan puts on
+/// its heights below the table too (`BELOW_TABLE_M`).
+pub const ABOVE_TOP_M: f64 = 0.015;
+
+/// Whether the planar polygon `facet` (robot frame, m) stands more than [`ABOVE_TOP_M`] above
+/// the horizontal top face `top` (its four corners, m, at one height up to the reconstruction's
+/// noise) anywhere over the top's footprint in plan view. The top was seen from above in both
+/// views, its far edge a step at its front edge's height: nothing of the same block stands
+/// over it (the cameras would see that, not a flat top), so such a facet is a false match (an
+/// L-block's step matched to the wrong edges: a 45° "facet" 67 mm high on a 40 mm block).
+pub fn stands_above_top(facet: &[nalgebra::Vector3<f64>], top: &[nalgebra::Vector3<f64>; 4]) -> bool {
+    let top_z = top.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+    let area: f64 = (0..4).map(|i| top[i].x * top[(i + 1) % 4].y - top[(i + 1) % 4].x * top[i].y).sum();
+    let mut poly: Vec<nalgebra::Vector3<f64>> = facet.to_vec();
+    // Sutherland-Hodgman against each side of the (convex) footprint; a planar polygon's
+    // heights interpolate linearly along its sides.
+    for i in 0..4 {
+        let (p, q) = (top[i], top[(i + 1) % 4]);
+        let side = |v: &nalgebra::Vector3<f64>| area.signum() * ((q.x - p.x) * (v.y - p.y) - (q.y - p.y) * (v.x - p.x));
+        let mut out = Vec::with_capacity(poly.len() + 2);
+        for k in 0..poly.len() {
+            let (u, v) = (poly[k], poly[(k + 1) % poly.len()]);
+            let (su, sv) = (side(&u), side(&v));
+            if su >= 0.0 {
+                out.push(u);
+            }
+            if (su >= 0.0) != (sv >= 0.0) {
+                out.push(u + (v - u) * (su / (su - sv)));
+            }
+        }
+        poly = out;
+        if poly.is_empty() {
+            return false;
+        }
+    }
+    poly.iter().any(|p| p.z > top_z + ABOVE_TOP_M)
+}
+
+#[cfg(test)]
+mod above_tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    fn top() -> [Vector3<f64>; 4] {
+        [Vector3::new(0.425, 0.004, 0.040), Vector3::new(0.422, 0.022, 0.040), Vector3::new(0.391, 0.022, 0.040), Vector3::new(0.394, 0.004, 0.040)]
+    }
+
+    #[test]
+    fn a_false_facet_rising_over_a_seen_top_stands_above_it() {
+        // clutter3 seed 26's facet: from the tall top's far side up to 67 mm in front of it.
+        let facet = [Vector3::new(0.437, -0.003, 0.067), Vector3::new(0.392, 0.017, 0.040), Vector3::new(0.419, 0.022, 0.039)];
+        assert!(stands_above_top(&facet, &top()));
+    }
+
+    #[test]
+    fn the_top_itself_a_lower_leg_and_a_facet_beside_it_do_not() {
+        let t = top();
+        let noisy_top: Vec<Vector3<f64>> = t.iter().map(|p| p + Vector3::new(0.0, 0.0, 0.008)).collect();
+        assert!(!stands_above_top(&noisy_top, &t));
+        let low_leg = [Vector3::new(0.39, 0.022, 0.02), Vector3::new(0.42, 0.022, 0.02), Vector3::new(0.42, 0.042, 0.02), Vector3::new(0.39, 0.042, 0.02)];
+        assert!(!stands_above_top(&low_leg, &t));
+        let tall_beside = [Vector3::new(0.30, 0.10, 0.0), Vector3::new(0.30, 0.10, 0.09), Vector3::new(0.33, 0.10, 0.09)];
+        assert!(!stands_above_top(&tall_beside, &t));
+    }
+}
