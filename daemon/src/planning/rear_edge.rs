@@ -168,7 +168,17 @@ pub const ABOVE_TOP_M: f64 = 0.015;
 /// views, its far edge a step at its front edge's height: nothing of the same block stands
 /// over it (the cameras would see that, not a flat top), so such a facet is a false match (an
 /// L-block's step matched to the wrong edges: a 45° "facet" 67 mm high on a 40 mm block).
+///
+/// Facets within 20° of vertical (the grasp rules' vertical faces) are not judged: one at the
+/// footprint's border is the face of a taller block touching this one (joined into its object
+/// within a few millimetres), which the fingers must keep clear of.
 pub fn stands_above_top(facet: &[nalgebra::Vector3<f64>], top: &[nalgebra::Vector3<f64>; 4]) -> bool {
+    let n = facet.len();
+    let normal: nalgebra::Vector3<f64> = (0..n).map(|i| facet[i].cross(&facet[(i + 1) % n])).sum();
+    match normal.try_normalize(1e-12) {
+        Some(u) if u.z.abs() > 20f64.to_radians().sin() => {}
+        _ => return false,
+    }
     let top_z = top.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
     let area: f64 = (0..4).map(|i| top[i].x * top[(i + 1) % 4].y - top[(i + 1) % 4].x * top[i].y).sum();
     let mut poly: Vec<nalgebra::Vector3<f64>> = facet.to_vec();
@@ -221,5 +231,9 @@ mod above_tests {
         assert!(!stands_above_top(&low_leg, &t));
         let tall_beside = [Vector3::new(0.30, 0.10, 0.0), Vector3::new(0.30, 0.10, 0.09), Vector3::new(0.33, 0.10, 0.09)];
         assert!(!stands_above_top(&tall_beside, &t));
+        // A taller block's face touching the top's far edge: vertical, kept (the rear finger
+        // must keep clear of it).
+        let touching = [Vector3::new(0.391, 0.004, 0.0), Vector3::new(0.391, 0.022, 0.0), Vector3::new(0.391, 0.022, 0.08), Vector3::new(0.391, 0.004, 0.08)];
+        assert!(!stands_above_top(&touching, &t));
     }
 }
