@@ -32,6 +32,7 @@ use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
+mod one_view_face;
 mod pixels;
 mod rear_edge;
 mod request;
@@ -432,6 +433,52 @@ fn rear_edges_from_image(
     count
 }
 
+/// The faces of planner facets dropped below the table, rebuilt from one view standing on the
+/// table and checked in the other ([`one_view_face`]): left view first, then right. Each
+/// joins the scene as a face of its own object (hypothesised, from `plan_facet`).
+#[allow(clippy::too_many_arguments)]
+fn faces_from_one_view(
+    ps: &mut handeye_vision::grasp::PlannedScene,
+    plan: &handeye_vision::planner::Plan,
+    dropped: &[usize],
+    cams: &handeye_vision::planner::projective::ProjectiveStereo,
+    images: &[ImageBuf; 2],
+    table_z_m: f64,
+    max_height_m: f64,
+    summary: &mut PlanSummary,
+) {
+    let project = |cam: &nalgebra::Matrix3x4<f64>, p: &Vector3<f64>| {
+        let x = cam * p.push(1.0);
+        [x[0] / x[2], x[1] / x[2]]
+    };
+    let mut next_component = ps.scene.facets.iter().map(|f| f.component).chain(ps.scene.edges.iter().map(|e| e.component)).max().map_or(0, |c| c + 1);
+    for &fi in dropped {
+        let facet = &plan.facets[fi].facet;
+        let views = [(&cams.left, &facet.left, &cams.right, 1usize), (&cams.right, &facet.right, &cams.left, 0usize)];
+        let found = views.iter().find_map(|(cam, poly, other_cam, other)| {
+            let face = one_view_face::face_on_table(cam, poly, table_z_m, max_height_m)?;
+            let other_px = face.map(|p| to_tracker_px(project(other_cam, &p)));
+            let seen = one_view_face::seen_in_other_view(&images[*other], &other_px);
+            let sides: Vec<f64> = (0..4).map(|i| edge_support(&images[*other], other_px[i], other_px[(i + 1) % 4])).collect();
+            tracing::debug!(plan_facet = fi, ?face, ?other_px, ?sides, seen, "a face from one view");
+            seen.then_some(face)
+        });
+        let Some(face) = found else { continue };
+        let polygon_m = face.to_vec();
+        let edges = (0..4).map(|e| handeye_vision::grasp::Segment3::new(polygon_m[e], polygon_m[(e + 1) % 4])).collect();
+        ps.scene.facets.push(handeye_vision::grasp::SceneFacet { polygon_m, edges, component: next_component });
+        ps.facets.push(handeye_vision::grasp::FacetSource {
+            plan_facet: fi,
+            hypothesised: true,
+            left_px: face.iter().map(|p| project(&cams.left, p)).collect(),
+            right_px: face.iter().map(|p| project(&cams.right, p)).collect(),
+            steps_onto: None,
+        });
+        next_component += 1;
+        *summary.sites.rejected_by_reason.entry("face_from_one_view".into()).or_insert(0) += 1;
+    }
+}
+
 fn arr3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
@@ -491,8 +538,10 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     // face matched to the wrong edges in the other view): its "steep top edge" would refuse
     // a block for a slope it does not have.
     let mut k = 0;
+    let mut below_table = Vec::new();
     while k < ps.facets.len() {
         if ps.scene.facets[k].polygon_m.iter().any(|p| p.z < req.scene.table_z_m - BELOW_TABLE_M) {
+            below_table.push(ps.facets[k].plan_facet);
             ps.facets.remove(k);
             ps.scene.facets.remove(k);
             *summary.sites.rejected_by_reason.entry("below_table".into()).or_insert(0) += 1;
@@ -580,6 +629,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 j += 1;
             }
         }
+    }
+    if let (Some(table_z), Some(cams)) = (req.scene.front_faces_to_table_z_m, &geo.projective) {
+        faces_from_one_view(&mut ps, &plan, &below_table, cams, &req.images, table_z, req.scene.max_height_m, &mut summary);
     }
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
