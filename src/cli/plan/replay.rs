@@ -7,8 +7,14 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use handeye_daemon::planning::{plan, replay_request, PlanOutput, PlanSummary, SiteSummary};
 use handeye_daemon::DaemonConfig;
+use handeye_vision::image::ImageBuf;
 
-use super::load_gray;
+/// A saved view as 8-bit grey (the same reader as `handeye plan --left`).
+fn load_gray(path: &Path) -> Result<ImageBuf> {
+    let img = crate::cli::png::read_gray(path)?;
+    let (w, h) = img.dimensions();
+    ImageBuf::from_vec(img.into_raw(), w as usize, h as usize).with_context(|| format!("image {} is empty", path.display()))
+}
 
 /// Replays the plan of the run reported in `dir` (see `PLAN_HELP`).
 pub fn replay(dir: &Path) -> Result<PlanOutput> {
