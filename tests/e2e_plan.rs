@@ -91,4 +91,26 @@ fn clutter3_plans_its_own_grasp_and_lifts_the_block_nearest_the_indicated_point(
         assert!(files.iter().any(|f| f == want), "{want} missing: {files:?}");
     }
     assert!(files.iter().any(|f| f.ends_with("_plan.png")), "no plan overlay: {files:?}");
+    // `handeye plan --run DIR` replays that plan from the report alone and decides the same.
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_handeye")).args(["plan", "--json", "--run"]).arg(&r.out.0).output().unwrap();
+    assert!(o.status.success(), "replay failed: {}", String::from_utf8_lossy(&o.stderr));
+    let replay: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in ["facets", "image_rear_edges", "candidates", "chosen"] {
+        assert!(same(&replay[key], &p[key]), "replayed `{key}` differs from the run's:\n{}\n{}", replay[key], p[key]);
+    }
+}
+
+/// The same JSON up to rounding (the replay recovers the calibration's model from the one the
+/// plan saved, which is a sum: the last bits may differ).
+fn same(a: &serde_json::Value, b: &serde_json::Value) -> bool {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            (x - y).abs() <= 1e-6 * (1.0 + x.abs().max(y.abs()))
+        }
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(x, y)| same(x, y)),
+        (Value::Object(x), Value::Object(y)) => x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same(v, w))),
+        _ => a == b,
+    }
 }

@@ -12,6 +12,8 @@ use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, EpipolarGeome
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use serde_json::{json, Value};
 
+mod replay;
+
 const PLAN_HELP: &str = "\
 Finds planar facets in a stereo pair (thesis chapter 5): sub-pixel edges, line segments,
 junctions, matches under a weak epipolar constraint, coplanar groups (left-to-right affine
@@ -49,7 +51,18 @@ The calibration file (--calib) is the affine stereo model w = M X + c as the dae
     \"residual_rms_px\": 0.4         optional: RMS residual of the calibration fit
   }
 
+Replay (--run DIR): the daemon's whole plan, not only the planner's facets: the grasp scene,
+the faces hypothesised below top edges, the rear edges looked for in the images, the grasp
+rules and the chosen site, rerun on the pair a run saved (DIR/plan_left.png, plan_right.png)
+with its configuration (DIR/daemon.toml) and the geometry in DIR/plan.json (model, cage,
+lever, indicated point, gripper mask). DIR is a `handeye run --out DIR` report or a batch's
+DIR/<scenario>/seed-<S>. Prints the facets, rear edges, rejections and the chosen site
+(--json: the plan.json the daemon would write); --overlay draws the plan as the report does.
+
 Examples:
+  handeye batch scenarios/clutter3.toml --first-seed 23 --seeds 1 --disturb --out out/b
+  handeye plan --run out/b/clutter3/seed-23
+  handeye plan --run out/b/clutter3/seed-23 --json --overlay replay.png
   handeye snapshot scenarios/pick_cube.toml --out snap
   handeye plan --left snap/left.png --right snap/right.png --points snap/cage.json --overlay plan.png
   handeye plan --left l.png --right r.png --calib calib.json --json > plan.json";
@@ -59,15 +72,18 @@ Examples:
 #[command(after_long_help = PLAN_HELP)]
 pub struct PlanArgs {
     /// Left view, PNG (any bit depth; converted to 8-bit grey).
-    #[arg(long, value_name = "PNG")]
-    pub left: PathBuf,
+    #[arg(long, value_name = "PNG", required_unless_present = "run")]
+    pub left: Option<PathBuf>,
     /// Right view, PNG, same size as the left.
-    #[arg(long, value_name = "PNG")]
-    pub right: PathBuf,
+    #[arg(long, value_name = "PNG", required_unless_present = "run")]
+    pub right: Option<PathBuf>,
+    /// Replay the daemon's plan of a run's report folder (see "Replay" below).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["left", "right", "calib", "points"])]
+    pub run: Option<PathBuf>,
     /// Affine stereo model as saved by the daemon: JSON object with `m` (4 rows of 3:
     /// pixels per metre for u, v, u', v'), `c` (4 numbers, pixels), `disparity_range_px`
     /// ([lo, hi] pixels) and optionally `residual_rms_px` (see the format below).
-    #[arg(long, value_name = "JSON", conflicts_with = "points", required_unless_present = "points")]
+    #[arg(long, value_name = "JSON", conflicts_with = "points", required_unless_present_any = ["points", "run"])]
     pub calib: Option<PathBuf>,
     /// Point correspondences: the simulator snapshot's cage.json as written (`points_m`,
     /// `left_px`, `right_px`: index-aligned lists; its pixel centres are at integers, so 0.5 px
@@ -100,15 +116,25 @@ pub struct PlanArgs {
 }
 
 pub fn run(args: PlanArgs) -> Result<()> {
-    let left = load_gray(&args.left)?;
-    let right = load_gray(&args.right)?;
+    if let Some(dir) = &args.run {
+        let out = replay::replay(dir)?;
+        if let Some(path) = &args.overlay {
+            let img = handeye_daemon::report::plan_overlay(&out);
+            img.save(path).with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        let text = if args.json { serde_json::to_string_pretty(&out.summary)? + "\n" } else { replay::replay_summary(&out) };
+        return write_stdout(&text);
+    }
+    let (Some(left_path), Some(right_path)) = (&args.left, &args.right) else { bail!("give --left and --right, or --run DIR") };
+    let left = load_gray(left_path)?;
+    let right = load_gray(right_path)?;
     if (left.width, left.height) != (right.width, right.height) {
         bail!(
             "{} is {}x{} but {} is {}x{}: the views must be the same size",
-            args.left.display(),
+            left_path.display(),
             left.width,
             left.height,
-            args.right.display(),
+            right_path.display(),
             right.width,
             right.height
         );
@@ -134,6 +160,10 @@ pub fn run(args: PlanArgs) -> Result<()> {
     if let (false, Some(out)) = (args.json, &args.overlay) {
         text += &format!("overlay written to {}\n", out.display());
     }
+    write_stdout(&text)
+}
+
+fn write_stdout(text: &str) -> Result<()> {
     // A closed pipe (`| head`) ends the output quietly rather than with a panic.
     use std::io::Write;
     match std::io::stdout().lock().write_all(text.as_bytes()) {

@@ -12,8 +12,6 @@
 
 use std::fmt;
 
-use handeye_vision::grasp::{GraspConfig, GripperModel};
-use handeye_vision::planner::PlannerConfig;
 use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, RejectReason};
@@ -23,7 +21,7 @@ use super::job::PendingJob;
 use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
 use crate::gripper::tool_from_reference;
 use crate::mission::{Mission, PlanningStats, TargetSource, TargetSpec};
-use crate::planning::{PlanCalibration, PlanOutput, PlanRequest, PlannedTarget, SceneLimits};
+use crate::planning::{plan_request, PlanCalibration, PlanMoment, PlanOutput, PlannedTarget};
 
 enum Stage {
     /// Going to the park pose (if not there).
@@ -169,24 +167,8 @@ impl PlanPhase {
                     return Step::fail(FailureKind::Internal, "plan: no gripper trackers to mask the gripper with");
                 };
                 let lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw));
-                let p = &m.cfg.plan;
-                let mut planner = PlannerConfig::default();
-                planner.matching.epipolar_tol_px = p.stereo.epipolar_tol_px;
-                let grasp = GraspConfig {
-                    gripper: GripperModel {
-                        finger_thickness_m: p.grasp.finger_thickness_m,
-                        finger_breadth_m: p.grasp.finger_breadth_m,
-                        jaw_opening_m: Some(m.cfg.gripper.max_opening_m.max(m.cfg.gripper.max_grasp_width_m)),
-                        max_width_m: m.cfg.gripper.max_grasp_width_m,
-                        ..GripperModel::default()
-                    },
-                    max_view_angle_rad: p.grasp.max_view_angle_deg.min(90.0).to_radians(),
-                    parallel_tolerance_rad: p.grasp.parallel_tolerance_deg.min(45.0).to_radians(),
-                    object_tolerance_m: p.grasp.object_tolerance_m,
-                    ..GraspConfig::default()
-                };
                 // Allocates once: the pair the planner works on.
-                let request = PlanRequest {
+                let moment = PlanMoment {
                     images: [c.left.to_owned(), c.right.to_owned()],
                     calibration: PlanCalibration {
                         model: cal.model.clone(),
@@ -195,21 +177,10 @@ impl PlanPhase {
                         lever_m: [lever.x, lever.y, lever.z],
                     },
                     masks,
-                    mask_margin_px: p.mask.mask_margin_px,
-                    scene: SceneLimits {
-                        indicated_m: m.targeting.indicated_m(),
-                        max_height_m: f64::from(c.robot.tool_pos_m[2]) - p.scene.arm_clearance_m,
-                        max_distance_m: p.grasp.max_site_distance_m,
-                        join_m: p.scene.join_m,
-                        table_z_m: m.cfg.grasp.table_z_m,
-                        front_faces_to_table_z_m: p.scene.hypothesise_front_faces.then_some(m.cfg.grasp.table_z_m),
-                        rear_edges_from_image: p.scene.rear_edges_from_image,
-                    },
-                    planner,
-                    grasp,
-                    disparity_margin: p.stereo.disparity_margin,
-                    disparity_margin_px: p.stereo.disparity_margin_px,
+                    indicated_m: m.targeting.indicated_m(),
+                    max_height_m: f64::from(c.robot.tool_pos_m[2]) - m.cfg.plan.scene.arm_clearance_m,
                 };
+                let request = plan_request(&m.cfg, moment);
                 match PendingJob::submit(&mut m.worker, c.frame_index, move || Box::new(crate::planning::plan(request))) {
                     Some(job) => {
                         self.updates_at_submit = Self::gripper_updates(m);

@@ -32,8 +32,12 @@ use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
+mod one_view_face;
 mod pixels;
+mod rear_edge;
+mod request;
 pub use pixels::{bottom_edge_offset, edge_support, mask_and_fill};
+pub use request::{plan_request, replay_request, PlanMoment, ReplayError};
 
 /// Planner pixel coordinates minus tracker pixel coordinates.
 pub const PLANNER_FROM_TRACKER_PX: f64 = 0.5;
@@ -239,6 +243,10 @@ pub struct PlanInputs {
     pub cage_image_px: Vec<[f64; 4]>,
     #[serde(default)]
     pub lever_m: Option<[f64; 3]>,
+    /// Features entirely above this height were taken for the arm, m (the parked tool's
+    /// height less the clearance). Absent in older reports.
+    #[serde(default)]
+    pub max_height_m: Option<f64>,
 }
 
 /// The stereo geometry the planner used.
@@ -332,11 +340,11 @@ fn to_tracker_px(p: [f64; 2]) -> [f64; 2] {
 /// it). A block's top face is horizontal at its front face's top edge; its far edge is a
 /// line at that height, parallel to the top edge, some depth behind it, that both images
 /// show as a step (the top face is lit, what lies behind is not the same grey). Depths from
-/// `MIN_DEPTH_M` to `MAX_DEPTH_M` are tried in 1 mm steps: past the front edge's own step
-/// (support under 0.3), the first with edge support of at least `MIN_SUPPORT` in both views
-/// is taken, moved on while the support grows. The edge
+/// `MIN_DEPTH_M` to the widest grasp plus 5 mm are tried in 1 mm steps, and the far edge is
+/// the strongest step past the front edge's own ([`rear_edge::far_edge`]). The edge
 /// joins the face's object, and a top face with that outline supersedes planner facets of
-/// the object it covers in both views (misplaced, they would stand in the fingers' way).
+/// the object it covers in both views (misplaced, they would stand in the fingers' way) or
+/// that stand above it over its footprint ([`rear_edge::stands_above_top`]).
 /// Returns how many edges were added.
 fn rear_edges_from_image(
     ps: &mut handeye_vision::grasp::PlannedScene,
@@ -344,11 +352,13 @@ fn rear_edges_from_image(
     images: &[ImageBuf; 2],
     indicated: &Vector3<f64>,
     max_distance_m: f64,
+    max_width_m: f64,
     summary: &mut PlanSummary,
 ) -> usize {
     const MIN_DEPTH_M: f64 = 0.008;
-    const MAX_DEPTH_M: f64 = 0.055;
-    const MIN_SUPPORT: f64 = 0.7;
+    // A far edge deeper than the widest grasp (plus the reconstruction's few millimetres)
+    // could not be grasped across anyway.
+    let max_depth_m = max_width_m + 0.005;
     let toward = ps.scene.toward_viewer;
     let mut added = Vec::new();
     for (k, f) in ps.scene.facets.iter().enumerate() {
@@ -373,44 +383,41 @@ fn rear_edges_from_image(
         let Some((a, b)) = top else { continue };
         // Along the edge's middle 70 % (its ends meet other faces' edges).
         let (a_in, b_in) = (a + 0.15 * (b - a), b - 0.15 * (b - a));
-        let support_at = |d: f64| {
+        let sample_at = |d: f64| {
             let (pa, pb) = (project(&(a_in + back * d)), project(&(b_in + back * d)));
-            edge_support(&images[0], pa[0], pb[0]).min(edge_support(&images[1], pa[1], pb[1]))
-        };
-        let steps = ((MAX_DEPTH_M - MIN_DEPTH_M) * 1e3).round() as usize;
-        let depths: Vec<f64> = (0..=steps).map(|i| MIN_DEPTH_M + i as f64 * 1e-3).collect();
-        // Past the front edge first (its step reaches a few pixels back: the top face is
-        // foreshortened), then the first line both views show.
-        let Some(clear) = depths.iter().position(|&d| support_at(d) < 0.3) else { continue };
-        let Some(first) = depths.iter().skip(clear).position(|&d| support_at(d) >= MIN_SUPPORT).map(|i| i + clear) else { continue };
-        let mut best = (depths[first], support_at(depths[first]));
-        for &d in &depths[first + 1..] {
-            let s = support_at(d);
-            if s < best.1 {
-                break;
+            let (fa, fb) = (project(&a_in), project(&b_in));
+            let offset = |k: usize| ((pa[k][0] + pb[k][0] - fa[k][0] - fb[k][0]) / 2.0).hypot((pa[k][1] + pb[k][1] - fa[k][1] - fb[k][1]) / 2.0);
+            rear_edge::DepthSample {
+                support: edge_support(&images[0], pa[0], pb[0]).min(edge_support(&images[1], pa[1], pb[1])),
+                strength_grey: pixels::edge_strength(&images[0], pa[0], pb[0]).min(pixels::edge_strength(&images[1], pa[1], pb[1])),
+                offset_px: offset(0).min(offset(1)),
             }
-            best = (d, s);
-        }
-        let (d, support) = best;
+        };
+        let steps = ((max_depth_m - MIN_DEPTH_M) * 1e3).round().max(0.0) as usize;
+        let depths: Vec<f64> = (0..=steps).map(|i| MIN_DEPTH_M + i as f64 * 1e-3).collect();
+        let profile: Vec<rear_edge::DepthSample> = depths.iter().map(|&d| sample_at(d)).collect();
+        tracing::debug!(
+            plan_facet = ps.facets[k].plan_facet,
+            profile = ?depths.iter().zip(&profile).map(|(d, s)| format!("{:.0}mm {:.1}px s{:.2} g{:.0}", d * 1e3, s.offset_px, s.support, s.strength_grey)).collect::<Vec<_>>(),
+            "rear-edge profile"
+        );
+        let Some(i) = rear_edge::far_edge(&profile) else { continue };
+        let (d, support) = (MIN_DEPTH_M + i * 1e-3, profile[i.round() as usize].support);
         let (ra, rb) = (a + back * d, b + back * d);
         let top_face = [a, b, rb, ra].map(|p| project(&p));
-        added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, d, support));
+        added.push((k, f.component, handeye_vision::grasp::Segment3::new(ra, rb), top_face, [a, b, rb, ra], d, support));
     }
     let count = added.len();
     let mut drop = vec![false; ps.scene.facets.len()];
-    for (k, component, segment, top_face, d, support) in added {
+    for (k, component, segment, top_face, top_m, d, support) in added {
         summary.scene.image_rear_edges.push((ps.facets[k].plan_facet, d * 1e3, support));
         ps.scene.edges.push(handeye_vision::grasp::SceneEdge { segment, component });
         ps.edge_matches.push(IMAGE_REAR_EDGE);
         let left: Vec<[f64; 2]> = top_face.iter().map(|p| [p[0][0] + PLANNER_FROM_TRACKER_PX, p[0][1] + PLANNER_FROM_TRACKER_PX]).collect();
         let right: Vec<[f64; 2]> = top_face.iter().map(|p| [p[1][0] + PLANNER_FROM_TRACKER_PX, p[1][1] + PLANNER_FROM_TRACKER_PX]).collect();
         for (j, (src, facet)) in ps.facets.iter().zip(&ps.scene.facets).enumerate() {
-            if j != k
-                && !src.hypothesised
-                && facet.component == component
-                && geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE
-                && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE
-            {
+            let covered = geom::covered_share(&src.left_px, &left) >= SUPERSEDED_SHARE && geom::covered_share(&src.right_px, &right) >= SUPERSEDED_SHARE;
+            if j != k && !src.hypothesised && facet.component == component && (covered || rear_edge::stands_above_top(&facet.polygon_m, &top_m)) {
                 drop[j] = true;
             }
         }
@@ -424,6 +431,52 @@ fn rear_edges_from_image(
         }
     }
     count
+}
+
+/// The faces of planner facets dropped below the table, rebuilt from one view standing on the
+/// table and checked in the other ([`one_view_face`]): left view first, then right. Each
+/// joins the scene as a face of its own object (hypothesised, from `plan_facet`).
+#[allow(clippy::too_many_arguments)]
+fn faces_from_one_view(
+    ps: &mut handeye_vision::grasp::PlannedScene,
+    plan: &handeye_vision::planner::Plan,
+    dropped: &[usize],
+    cams: &handeye_vision::planner::projective::ProjectiveStereo,
+    images: &[ImageBuf; 2],
+    table_z_m: f64,
+    max_height_m: f64,
+    summary: &mut PlanSummary,
+) {
+    let project = |cam: &nalgebra::Matrix3x4<f64>, p: &Vector3<f64>| {
+        let x = cam * p.push(1.0);
+        [x[0] / x[2], x[1] / x[2]]
+    };
+    let mut next_component = ps.scene.facets.iter().map(|f| f.component).chain(ps.scene.edges.iter().map(|e| e.component)).max().map_or(0, |c| c + 1);
+    for &fi in dropped {
+        let facet = &plan.facets[fi].facet;
+        let views = [(&cams.left, &facet.left, &cams.right, 1usize), (&cams.right, &facet.right, &cams.left, 0usize)];
+        let found = views.iter().find_map(|(cam, poly, other_cam, other)| {
+            let face = one_view_face::face_on_table(cam, poly, table_z_m, max_height_m)?;
+            let other_px = face.map(|p| to_tracker_px(project(other_cam, &p)));
+            let seen = one_view_face::seen_in_other_view(&images[*other], &other_px);
+            let sides: Vec<f64> = (0..4).map(|i| edge_support(&images[*other], other_px[i], other_px[(i + 1) % 4])).collect();
+            tracing::debug!(plan_facet = fi, ?face, ?other_px, ?sides, seen, "a face from one view");
+            seen.then_some(face)
+        });
+        let Some(face) = found else { continue };
+        let polygon_m = face.to_vec();
+        let edges = (0..4).map(|e| handeye_vision::grasp::Segment3::new(polygon_m[e], polygon_m[(e + 1) % 4])).collect();
+        ps.scene.facets.push(handeye_vision::grasp::SceneFacet { polygon_m, edges, component: next_component });
+        ps.facets.push(handeye_vision::grasp::FacetSource {
+            plan_facet: fi,
+            hypothesised: true,
+            left_px: face.iter().map(|p| project(&cams.left, p)).collect(),
+            right_px: face.iter().map(|p| project(&cams.right, p)).collect(),
+            steps_onto: None,
+        });
+        next_component += 1;
+        *summary.sites.rejected_by_reason.entry("face_from_one_view".into()).or_insert(0) += 1;
+    }
 }
 
 fn arr3(v: &Vector3<f64>) -> [f64; 3] {
@@ -441,6 +494,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             cage_robot_m: req.calibration.cage_robot_m.iter().map(arr3).collect(),
             cage_image_px: req.calibration.cage_image_px.clone(),
             lever_m: Some(req.calibration.lever_m),
+            max_height_m: Some(req.scene.max_height_m),
             ..Default::default()
         },
         ..Default::default()
@@ -484,8 +538,10 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     // face matched to the wrong edges in the other view): its "steep top edge" would refuse
     // a block for a slope it does not have.
     let mut k = 0;
+    let mut below_table = Vec::new();
     while k < ps.facets.len() {
         if ps.scene.facets[k].polygon_m.iter().any(|p| p.z < req.scene.table_z_m - BELOW_TABLE_M) {
+            below_table.push(ps.facets[k].plan_facet);
             ps.facets.remove(k);
             ps.scene.facets.remove(k);
             *summary.sites.rejected_by_reason.entry("below_table".into()).or_insert(0) += 1;
@@ -574,6 +630,9 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
             }
         }
     }
+    if let (Some(table_z), Some(cams)) = (req.scene.front_faces_to_table_z_m, &geo.projective) {
+        faces_from_one_view(&mut ps, &plan, &below_table, cams, &req.images, table_z, req.scene.max_height_m, &mut summary);
+    }
     let s = PLANNER_FROM_TRACKER_PX;
     let to_tracker = |p: &[[f64; 2]]| -> Vec<[f64; 2]> { p.iter().map(|q| [q[0] - s, q[1] - s]).collect() };
     for (fi, f) in plan.facets.iter().enumerate() {
@@ -617,7 +676,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         && !grasps.candidates.iter().any(|g| near_point(g, &p) && g.site.width_m >= MIN_SOLID_WIDTH_M)
     {
         let project = |q: &Vector3<f64>| project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, q);
-        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.scene.max_distance_m, &mut summary);
+        let found = rear_edges_from_image(&mut ps, &project, &req.images, &p, req.scene.max_distance_m, req.grasp.gripper.max_width_m, &mut summary);
         if found > 0
             && let Ok(g) = plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp)
         {
@@ -802,7 +861,7 @@ mod json_shape_tests {
         let mut expected = vec![
             "segments", "matches", "planes", "facets", "candidates", "chosen", "rejected_sites", "rejected_by_reason",
             "facet_rejections", "superseded_facets", "image_rear_edges", "indicated_m", "indicated_px", "masks_px", "masked_px",
-            "cage_robot_m", "cage_image_px", "lever_m",
+            "cage_robot_m", "cage_image_px", "lever_m", "max_height_m",
             "model", "bootstrap_rms_px", "projective_residual_px", "planner_ms", "total_ms",
         ];
         expected.sort_unstable();
@@ -818,7 +877,7 @@ mod json_shape_tests {
         assert_eq!(serde_json::to_value(&back).unwrap(), value);
         // Reports written before the cage was kept still read.
         let mut old = value.clone();
-        for key in ["cage_robot_m", "cage_image_px", "lever_m"] {
+        for key in ["cage_robot_m", "cage_image_px", "lever_m", "max_height_m"] {
             old.as_object_mut().unwrap().remove(key);
         }
         assert!(serde_json::from_value::<PlanSummary>(old).is_ok());
