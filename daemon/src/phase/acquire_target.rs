@@ -86,15 +86,27 @@ impl AcquireTarget {
         // the trackers on them (the hint's corner errors would otherwise stay in the template),
         // each side within what the plan allows (`target_outline`): the planner matched its
         // edges within its epipolar tolerance, and the tracker finds an edge within its inlier
-        // band; a side further off slid onto another edge (a same-shade neighbour's).
+        // band; a side further off in one view only slid onto another edge there (a
+        // same-shade neighbour's outer edge) and is held on the plan's line.
         let half = m.cfg.target.converge_frames / 3;
         if half > 0 && (self.frames == half || self.frames == 2 * half) {
-            for (k, view) in View::ALL.into_iter().enumerate() {
-                let Some(t) = m.trackers.get_mut(Role::Target, view) else { continue };
-                let max_shift_px = m.cfg.plan.stereo.epipolar_tol_px + t.config().inlier_px;
-                let held = crate::target_outline::refine_held_to_plan(t, &self.planned_px[k], max_shift_px);
-                if !held.is_empty() {
-                    tracing::info!(?view, sides = ?held, "acquire_target: sides held on the plan's outline (no edge of theirs near it in this view)");
+            match (m.trackers.remove(Role::Target, View::Left), m.trackers.remove(Role::Target, View::Right)) {
+                (Some(mut left), Some(mut right)) => {
+                    let max_shift_px = m.cfg.plan.stereo.epipolar_tol_px + left.config().inlier_px;
+                    let planned = [&self.planned_px[0][..], &self.planned_px[1][..]];
+                    let held = crate::target_outline::refine_held_to_plan([&mut left, &mut right], planned, max_shift_px);
+                    if held.iter().any(|h| !h.is_empty()) {
+                        tracing::info!(left = ?held[0], right = ?held[1], "acquire_target: sides held on the plan's outline (no edge of theirs near it in that view)");
+                    }
+                    m.trackers.insert(Role::Target, View::Left, left);
+                    m.trackers.insert(Role::Target, View::Right, right);
+                }
+                (left, right) => {
+                    for (view, t) in [(View::Left, left), (View::Right, right)] {
+                        if let Some(t) = t {
+                            m.trackers.insert(Role::Target, view, t);
+                        }
+                    }
                 }
             }
         }
