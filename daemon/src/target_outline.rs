@@ -105,10 +105,10 @@ pub fn hold_to_plan(refined_px: &[[f64; 2]], planned_px: &[[f64; 2]], held_sides
         if held_sides.contains(&j) { (planned(j), planned(j + 1) - planned(j)) } else { (refined(j), refined(j + 1) - refined(j)) }
     };
     let mut corners_px = Vec::with_capacity(k);
-    for j in 0..k {
+    for (j, &corner) in refined_px.iter().enumerate() {
         let before = (j + k - 1) % k;
         if !held_sides.contains(&before) && !held_sides.contains(&j) {
-            corners_px.push(refined_px[j]);
+            corners_px.push(corner);
             continue;
         }
         let ((p, u), (q, w)) = (line(before), line(j));
