@@ -324,7 +324,8 @@ fn otsu(hist: &[usize; 256]) -> u8 {
 /// least squares), and adjacent lines are intersected. A template built from a clicked or
 /// coarsely found polygon keeps that polygon's shape errors (an operator's ±3 px on a
 /// 30 px facet); refining the corners from the image and restarting the tracker removes
-/// them. `None` when a side has too few edges or lines are near parallel. Allocates (once
+/// them. A side the tracker does not measure ([`ContourTracker::side_measured`]) stays
+/// where it is. `None` when a side has too few edges or lines are near parallel. Allocates (once
 /// per refinement, while acquiring).
 pub fn refine_polygon(t: &ContourTracker) -> Option<Vec<[f64; 2]>> {
     let corners: Vec<Vector2<f64>> = t.corners().collect();
@@ -346,9 +347,15 @@ pub fn refine_polygon(t: &ContourTracker) -> Option<Vec<[f64; 2]>> {
         }
         sides[best.1].push(e);
     }
-    // Each side as (point, unit direction).
+    // Each side as (point, unit direction); a side the tracker does not measure keeps the
+    // line it is placed on.
     let mut lines = Vec::with_capacity(k);
-    for pts in &sides {
+    for (j, pts) in sides.iter().enumerate() {
+        if !t.side_measured(j) {
+            let (a, b) = (corners[j], corners[(j + 1) % k]);
+            lines.push((a, (b - a).normalize()));
+            continue;
+        }
         if pts.len() < 5 {
             return None;
         }

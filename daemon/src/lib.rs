@@ -25,6 +25,7 @@ pub mod report;
 pub mod safety;
 pub mod service;
 pub mod stereo_model;
+pub mod target_outline;
 #[cfg(test)]
 mod test_cameras;
 pub mod servo_plot;

@@ -16,11 +16,13 @@ pub struct AcquireTarget {
     start_ns: u64,
     started: bool,
     frames: u32,
+    /// The target polygon the trackers started on, per view (left, right).
+    planned_px: [Vec<[f64; 2]>; 2],
 }
 
 impl AcquireTarget {
     pub fn new(time_ns: u64) -> Self {
-        Self { start_ns: time_ns, started: false, frames: 0 }
+        Self { start_ns: time_ns, started: false, frames: 0, planned_px: [Vec::new(), Vec::new()] }
     }
 
     /// Picks up after the arm held `held_ns` for the gripper's trackers: the time held does
@@ -67,6 +69,7 @@ impl AcquireTarget {
                     max_depth * 1e3
                 ));
             }
+            self.planned_px = [hint.left_px.clone(), hint.right_px.clone()];
             for (view, poly) in [(View::Left, &hint.left_px), (View::Right, &hint.right_px)] {
                 match ContourTracker::new(m.cfg.tracker.target_tracker_config(), poly) {
                     Ok(t) => {
@@ -80,13 +83,30 @@ impl AcquireTarget {
         }
         self.frames += 1;
         // Twice while converging: refine the hinted corners from the image's edges and restart
-        // the trackers on them (the hint's corner errors would otherwise stay in the template).
+        // the trackers on them (the hint's corner errors would otherwise stay in the template),
+        // each side within what the plan allows (`target_outline`): the planner matched its
+        // edges within its epipolar tolerance, and the tracker finds an edge within its inlier
+        // band; a side further off in one view only slid onto another edge there (a
+        // same-shade neighbour's outer edge) and is held on the plan's line.
         let half = m.cfg.target.converge_frames / 3;
         if half > 0 && (self.frames == half || self.frames == 2 * half) {
-            for view in View::ALL {
-                let Some(t) = m.trackers.get_mut(Role::Target, view) else { continue };
-                if let Some(corners) = crate::gripper::refine_polygon(t) {
-                    let _ = t.reinit(&corners);
+            match (m.trackers.remove(Role::Target, View::Left), m.trackers.remove(Role::Target, View::Right)) {
+                (Some(mut left), Some(mut right)) => {
+                    let max_shift_px = m.cfg.plan.stereo.epipolar_tol_px + left.config().inlier_px;
+                    let planned = [&self.planned_px[0][..], &self.planned_px[1][..]];
+                    let held = crate::target_outline::refine_held_to_plan([&mut left, &mut right], planned, max_shift_px);
+                    if held.iter().any(|h| !h.is_empty()) {
+                        tracing::info!(left = ?held[0], right = ?held[1], "acquire_target: sides held on the plan's outline (no edge of theirs near it in that view)");
+                    }
+                    m.trackers.insert(Role::Target, View::Left, left);
+                    m.trackers.insert(Role::Target, View::Right, right);
+                }
+                (left, right) => {
+                    for (view, t) in [(View::Left, left), (View::Right, right)] {
+                        if let Some(t) = t {
+                            m.trackers.insert(Role::Target, view, t);
+                        }
+                    }
                 }
             }
         }

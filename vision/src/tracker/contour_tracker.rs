@@ -103,6 +103,9 @@ pub struct ContourTracker {
     /// Updates whose wide pass saw a rival edge outnumber its side's, less those that did not
     /// (never below 0; see `TrackerConfig::max_rival_updates`).
     rival_updates: usize,
+    /// Bit `j` set: side `j` is not searched (its edge is not where this view can see it,
+    /// e.g. a crease between two faces of one shade); see [`Self::set_side_measured`].
+    unmeasured_sides: u64,
 }
 
 /// What one search and fit found.
@@ -186,6 +189,7 @@ impl ContourTracker {
             fitted_px: Vec::with_capacity(n),
             rival: super::wrong_lock::Rival::default(),
             rival_updates: 0,
+            unmeasured_sides: 0,
         };
         tracker.restart(frame);
         tracker
@@ -558,7 +562,40 @@ impl ContourTracker {
         let (xs, ys) = (&self.pos_x[..searched], &self.pos_y[..searched]);
         let fit = self.fit.candidate_slots();
         self.lines.search(image, &self.sides, side_of, xs, ys, &settings, &mut self.edges[..searched], Some(fit));
+        // A side this view cannot see measures nothing: whatever edge lies within its search
+        // range (the neighbouring face's outer edge) is not its edge.
+        if self.unmeasured_sides != 0 {
+            for (s, side) in self.fit_sides.iter().enumerate() {
+                if !self.side_measured(s) {
+                    for i in side.first..side.first + side.count {
+                        self.edges[i].count = 0;
+                        self.fit.set_candidates(i, &[]);
+                    }
+                }
+            }
+        }
         searched
+    }
+
+    /// Whether side `side` (corner `side` to `side + 1`) is searched for its edge.
+    pub fn side_measured(&self, side: usize) -> bool {
+        side >= 64 || self.unmeasured_sides & (1 << side) == 0
+    }
+
+    /// Stops (or resumes) searching side `side` for its edge: the contour is then placed by
+    /// its other sides, and its confidence counts only the sides it measures. For a side
+    /// whose edge the caller knows this view cannot see (two faces of one shade meet there),
+    /// where the nearest edge in reach would pull the side off its face. Kept through
+    /// [`reinit`](Self::reinit) and [`reinit_at`](Self::reinit_at); sides past the 64th are
+    /// always measured.
+    pub fn set_side_measured(&mut self, side: usize, measured: bool) {
+        if side < 64 {
+            if measured {
+                self.unmeasured_sides &= !(1 << side);
+            } else {
+                self.unmeasured_sides |= 1 << side;
+            }
+        }
     }
 
     /// Quality and geometry checks of the fitted placement; `Some(reason)` means lost.
@@ -568,7 +605,12 @@ impl ContourTracker {
         let (mut outside, mut with_edge, mut inliers, mut sq) = (0usize, 0usize, 0usize, 0.0);
         let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
         let (mut axx, mut axy, mut ayy) = (0.0, 0.0, 0.0);
+        let mut measured = 0usize;
         for i in 0..n {
+            if !self.side_measured(usize::from(self.side_of[i])) {
+                continue;
+            }
+            measured += 1;
             let (nx, ny) = (self.nrm_x[i], self.nrm_y[i]);
             axx += nx * nx;
             axy += nx * ny;
@@ -588,7 +630,7 @@ impl ContourTracker {
                 }
             }
         }
-        let nf = n as f64;
+        let nf = measured.max(1) as f64;
         let residual_px = if inliers > 0 { (sq / inliers as f64).sqrt() } else { 0.0 };
         let inlier_fraction = inliers as f64 / nf;
         // How well the inliers pin the contour down in its worst direction, relative to what
