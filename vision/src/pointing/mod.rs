@@ -12,6 +12,7 @@
 //!
 //! Inside: `gesture` → `silhouette` → `geometry`.
 
+mod finger;
 mod geometry;
 mod gesture;
 mod silhouette;
