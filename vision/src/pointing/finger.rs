@@ -15,9 +15,10 @@
 const SIDE: u32 = 3;
 const DIAGONAL: u32 = 4;
 
-/// A finger part is at least this wide, px, and at least the opening disk's radius (over half
-/// the wide part's half width): narrower protrusions are a hand's or a sleeve's side face seen
-/// at a grazing angle (a finger is about a fifth as wide as a hand seen from the front).
+/// A finger part is at least this wide, px, and at least 0.8 times the opening disk's radius
+/// (the disk's radius is over half the wide part's half width): narrower protrusions are a
+/// hand's or a sleeve's side face seen at a grazing angle (on rendered frames 0.5-0.75 times
+/// the radius; fingers 0.85-1.3).
 const MIN_WIDTH_PX: f64 = 6.0;
 
 /// The finger part of a silhouette.
@@ -152,7 +153,7 @@ impl FingerFinder {
                 && c.root.0 >= 2.0
                 && elongation >= min_elongation
                 && length >= min_length_px
-                && width >= MIN_WIDTH_PX.max(f64::from(radius) / f64::from(SIDE))
+                && width >= MIN_WIDTH_PX.max(0.8 * f64::from(radius) / f64::from(SIDE))
                 && width <= 2.0 * f64::from(radius) / f64::from(SIDE) + 2.0;
             // The largest: a finger outweighs the slivers a hand's side faces leave.
             if finger_like && best.is_none_or(|(_, b)| b.n < c.n) {
