@@ -21,11 +21,9 @@ const DIAGONAL: u32 = 4;
 /// the radius; fingers 0.85-1.3).
 const MIN_WIDTH_PX: f64 = 6.0;
 
-/// The finger part of a silhouette.
-#[derive(Debug, Clone, PartialEq)]
+/// The finger part of a silhouette (its pixels go to the caller's buffer).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct FingerPart {
-    /// The finger's pixels.
-    pub pixels: Vec<(u16, u16)>,
     /// Where it joins the hand: the mean of its pixels next to the opened silhouette, px.
     pub root_px: [f64; 2],
     /// Its length and mean width (from its second moments), px.
@@ -58,9 +56,10 @@ struct Component {
 }
 
 impl FingerFinder {
-    /// The finger part of the silhouette `pixels` of a `w` x `h` image: the largest thin
-    /// protrusion (elongated at least `min_elongation`, at least `min_length_px` long, joined
-    /// to the wide part at one end) that does not touch the image border: the largest such. `None` if there is none.
+    /// The finger part of the silhouette `pixels` of a `w` x `h` image, its pixels in `out`:
+    /// the largest thin protrusion (elongated at least `min_elongation`, at least
+    /// `min_length_px` long, joined to the wide part at one end) that does not touch the image
+    /// border. `None` if there is none.
     pub fn find(
         &mut self,
         pixels: &[(u16, u16)],
@@ -68,7 +67,9 @@ impl FingerFinder {
         h: usize,
         min_elongation: f64,
         min_length_px: f64,
+        out: &mut Vec<(u16, u16)>,
     ) -> Option<FingerPart> {
+        out.clear();
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
         for &(x, y) in pixels {
             (x0, y0, x1, y1) = (
@@ -162,17 +163,12 @@ impl FingerFinder {
         }
         let (id, c) = best?;
         let (length_px, width_px, _) = shape(&c)?;
-        let pixels = (0..self.cell.len())
-            .filter(|&k| self.label[k] == id)
-            .map(|k| {
-                (
-                    ((k % bw) as isize + bx) as u16,
-                    ((k / bw) as isize + by) as u16,
-                )
-            })
-            .collect();
+        out.extend(
+            (0..self.cell.len())
+                .filter(|&k| self.label[k] == id)
+                .map(|k| (((k % bw) as isize + bx) as u16, ((k / bw) as isize + by) as u16)),
+        );
         Some(FingerPart {
-            pixels,
             root_px: [
                 c.root.1 / c.root.0 + bx as f64,
                 c.root.2 / c.root.0 + by as f64,

@@ -7,11 +7,13 @@
 //! principal axis, so a wide hand on a narrow finger, or a forearm cut by the image border,
 //! does not tilt it; cross-sections that touch the border, or whose middle lies far off the
 //! line (a hole where the arm passes over something of its own grey), are left out of the
-//! final fit.
+//! final fit. A silhouette with no axis (a blob: the hand from the front, the sleeve lost
+//! against the scene) gets the finger's own, found as a part of its own (`finger.rs`).
 //!
 //! Nothing is allocated per frame once the buffers have grown to the image size.
 
 use super::finger::FingerFinder;
+use super::line_fit::{robust_fit, LineFit};
 use super::geometry::ImageLine;
 use crate::image::ImageView;
 
@@ -162,11 +164,18 @@ impl SilhouetteFinder {
     /// The axis of the finger found as the silhouette's thin protrusion ([`FingerFinder`]),
     /// measured on the finger's pixels only; `None` if there is no such part or no line on it.
     fn finger_axis(&mut self, background: &ImageView, w: usize, h: usize) -> Option<ArmAxis> {
-        let part = self.finger.find(&self.pixels, w, h, FINGER_MIN_ELONGATION, FINGER_MIN_LENGTH_PX)?;
-        let (c, e, _) = principal(&part.pixels)?;
-        let whole = std::mem::replace(&mut self.pixels, part.pixels);
+        let part = self.finger.find(&self.pixels, w, h, FINGER_MIN_ELONGATION, FINGER_MIN_LENGTH_PX, &mut self.finger_pixels)?;
+        let Some((c, e, _)) = principal(&self.finger_pixels) else {
+            self.finger_pixels.clear();
+            return None;
+        };
+        // Measured on the finger's pixels alone (buffers swapped, not copied).
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
         let axis = self.axis_along(background, c, e, Some(part.root_px));
-        self.finger_pixels = std::mem::replace(&mut self.pixels, whole);
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
+        if axis.is_err() {
+            self.finger_pixels.clear();
+        }
         let mut axis = axis.ok()?;
         // A line on a short finger is uncertain in angle beyond its sections' scatter: each end
         // of the measured part is good to about a third of a pixel (the edges' grey, the
@@ -399,72 +408,6 @@ impl SilhouetteFinder {
                 }
             }
         }
-    }
-}
-
-/// `t = a + b (s - s_mean)` fitted to the selected midpoints, with its standard errors.
-#[derive(Debug, Clone, Copy)]
-struct LineFit {
-    a: f64,
-    b: f64,
-    s_mean: f64,
-    s_min: f64,
-    s_max: f64,
-    count: usize,
-    a_sigma: f64,
-    b_sigma: f64,
-}
-
-impl LineFit {
-    fn at(&self, s: f64) -> f64 {
-        self.a + self.b * (s - self.s_mean)
-    }
-}
-
-/// Least squares, then again three times without the sections more than 3 mean deviations
-/// (at least 1 px) off the line.
-fn robust_fit(mids: &[[f64; 3]]) -> LineFit {
-    let mut fit = fit_line(mids, |_| true);
-    for _ in 0..3 {
-        let dev = mids.iter().map(|m| (m[1] - fit.at(m[0])).abs()).sum::<f64>() / mids.len().max(1) as f64;
-        let limit = (3.0 * 1.25 * dev).max(1.0);
-        fit = fit_line(mids, |m| (m[1] - fit.at(m[0])).abs() <= limit);
-    }
-    fit
-}
-
-fn fit_line(mids: &[[f64; 3]], keep: impl Fn(&[f64; 3]) -> bool) -> LineFit {
-    let (mut n, mut ss, mut st) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut s_min, mut s_max) = (f64::INFINITY, f64::NEG_INFINITY);
-    for m in mids.iter().filter(|m| keep(m)) {
-        n += 1.0;
-        ss += m[0];
-        st += m[1];
-        s_min = s_min.min(m[0]);
-        s_max = s_max.max(m[0]);
-    }
-    let (s_mean, t_mean) = (ss / n.max(1.0), st / n.max(1.0));
-    let (mut sss, mut sst) = (0.0, 0.0);
-    for m in mids.iter().filter(|m| keep(m)) {
-        sss += (m[0] - s_mean).powi(2);
-        sst += (m[0] - s_mean) * (m[1] - t_mean);
-    }
-    let b = if sss > 0.0 { sst / sss } else { 0.0 };
-    let mut rss = 0.0;
-    for m in mids.iter().filter(|m| keep(m)) {
-        rss += (m[1] - t_mean - b * (m[0] - s_mean)).powi(2);
-    }
-    // Neighbouring sections share pixels' noise: count them as half as many independent ones.
-    let sigma = (rss / (n - 2.0).max(1.0)).sqrt() * std::f64::consts::SQRT_2;
-    LineFit {
-        a: t_mean,
-        b,
-        s_mean,
-        s_min,
-        s_max,
-        count: n as usize,
-        a_sigma: sigma / n.max(1.0).sqrt(),
-        b_sigma: sigma / sss.max(1e-9).sqrt(),
     }
 }
 
