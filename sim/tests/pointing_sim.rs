@@ -219,12 +219,13 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
         let o = &outcomes[(*seed - 1) as usize];
         assert!(matches!(o.state, GestureState::Absent), "seed {seed}: still {:?} at the end of the hold", o.state);
     }
-    // 20 of 30 answered with the arm parked out of the hand's way and the watch going on
-    // after a refusal while the hand holds (18 when the first refusal ended it, 17 with the
-    // arm at home in front of the hand; BENCHMARKS.md, Pointing): the refusals are the point
-    // of the design (never a guess; the operator points again), but fewer answers than this
-    // is a regression.
-    assert!(errors.len() >= 19, "only {} of {GESTURES} gestures gave a point", errors.len());
+    // 21 of 30 answered with the finger found as a part of its own in a blob-shaped
+    // silhouette (seed 14: a hand seen from the front), 20 before, with the arm parked out of
+    // the hand's way and the watch going on after a refusal while the hand holds (18 when the
+    // first refusal ended it, 17 with the arm at home in front of the hand; BENCHMARKS.md,
+    // Pointing): the refusals are the point of the design (never a guess; the operator points
+    // again), but fewer answers than this is a regression.
+    assert!(errors.len() >= 20, "only {} of {GESTURES} gestures gave a point", errors.len());
     assert!(rank(0.5) <= 0.010, "median error {:.1} mm", rank(0.5) * 1e3);
     assert!(rank(0.9) <= 0.020, "90th percentile error {:.1} mm", rank(0.9) * 1e3);
     let wrong: Vec<u64> = outcomes.iter().filter(|o| o.picks_target == Some(false)).map(|o| o.seed).collect();

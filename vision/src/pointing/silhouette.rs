@@ -7,10 +7,13 @@
 //! principal axis, so a wide hand on a narrow finger, or a forearm cut by the image border,
 //! does not tilt it; cross-sections that touch the border, or whose middle lies far off the
 //! line (a hole where the arm passes over something of its own grey), are left out of the
-//! final fit.
+//! final fit. A silhouette with no axis (a blob: the hand from the front, the sleeve lost
+//! against the scene) gets the finger's own, found as a part of its own (`finger.rs`).
 //!
 //! Nothing is allocated per frame once the buffers have grown to the image size.
 
+use super::finger::FingerFinder;
+use super::line_fit::{robust_fit, LineFit};
 use super::geometry::ImageLine;
 use crate::image::ImageView;
 
@@ -95,12 +98,19 @@ pub struct SilhouetteFinder {
     keep: Vec<bool>,
     /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
     tip_at_start: bool,
+    finger: FingerFinder,
+    /// The finger part's pixels when the last axis came from it (else empty).
+    finger_pixels: Vec<(u16, u16)>,
 }
 
 /// Sections on each side of a section that must have its width for it to count, 1 px each.
 const STEP_REACH: usize = 3;
 /// The finger alone gives the line when this many of its sections are clean.
 const MIN_FINGER_SECTIONS: usize = 15;
+/// A finger found as a part of its own ([`FingerFinder`]) is at least this many times longer
+/// than wide, and this long, px (a fingertip seen nearly end-on has no line worth fitting).
+const FINGER_MIN_ELONGATION: f64 = 1.5;
+const FINGER_MIN_LENGTH_PX: f64 = 20.0;
 
 impl SilhouetteFinder {
     pub fn new(config: SilhouetteConfig) -> Self {
@@ -113,6 +123,12 @@ impl SilhouetteFinder {
         self.pixels.len()
     }
 
+    /// When the last axis came from the finger found as a part of its own (the whole
+    /// silhouette had none), the finger's pixels; else empty. For overlays and diagnosis.
+    pub fn finger_part_pixels(&self) -> &[(u16, u16)] {
+        &self.finger_pixels
+    }
+
     /// The arm's axis in `frame`, against `background` (the same view before the arm came).
     pub fn find(&mut self, background: &ImageView, frame: &ImageView) -> Result<ArmAxis, SilhouetteError> {
         let (w, h) = (frame.width(), frame.height());
@@ -120,34 +136,63 @@ impl SilhouetteFinder {
             return Err(SilhouetteError::SizeMismatch);
         }
         self.difference(background, frame);
+        self.finger_pixels.clear();
         let n = self.pixels.len();
         if n < self.config.min_pixels {
             return Err(SilhouetteError::NothingThere { pixels: n });
         }
-        // Principal direction of the changed pixels.
-        let (mut sx, mut sy) = (0.0, 0.0);
-        for &(x, y) in &self.pixels {
-            sx += f64::from(x);
-            sy += f64::from(y);
-        }
-        let (cx, cy) = (sx / n as f64, sy / n as f64);
-        let (mut cxx, mut cxy, mut cyy) = (0.0, 0.0, 0.0);
-        for &(x, y) in &self.pixels {
-            let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
-            cxx += dx * dx;
-            cxy += dx * dy;
-            cyy += dy * dy;
-        }
-        let half_diff = 0.5 * (cxx - cyy);
-        let root = (half_diff * half_diff + cxy * cxy).sqrt();
-        let (l1, l2) = (0.5 * (cxx + cyy) + root, 0.5 * (cxx + cyy) - root);
-        if l2 <= 0.0 || (l1 / l2).sqrt() < self.config.min_elongation {
+        let (sx, sy) = self.pixels.iter().fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + f64::from(x), sy + f64::from(y)));
+        let centroid_px = [sx / n as f64, sy / n as f64];
+        // The whole silhouette's midline; failing that (a blob: the hand seen from the front,
+        // its sleeve lost against the scene), the finger's alone, as a part of its own.
+        let axis = match self.whole_axis(background) {
+            Ok(axis) => axis,
+            Err(whole) => self.finger_axis(background, w, h).ok_or(whole)?,
+        };
+        Ok(ArmAxis { centroid_px, pixels: n, ..axis })
+    }
+
+    /// The axis of the whole silhouette (`pixels`), if it is elongated like an arm.
+    fn whole_axis(&mut self, background: &ImageView) -> Result<ArmAxis, SilhouetteError> {
+        let (c, e, elongation) = principal(&self.pixels).ok_or(SilhouetteError::NotElongated)?;
+        if elongation < self.config.min_elongation {
             return Err(SilhouetteError::NotElongated);
         }
-        let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+        self.axis_along(background, c, e, None)
+    }
+
+    /// The axis of the finger found as the silhouette's thin protrusion ([`FingerFinder`]),
+    /// measured on the finger's pixels only; `None` if there is no such part or no line on it.
+    fn finger_axis(&mut self, background: &ImageView, w: usize, h: usize) -> Option<ArmAxis> {
+        let part = self.finger.find(&self.pixels, w, h, FINGER_MIN_ELONGATION, FINGER_MIN_LENGTH_PX, &mut self.finger_pixels)?;
+        let Some((c, e, _)) = principal(&self.finger_pixels) else {
+            self.finger_pixels.clear();
+            return None;
+        };
+        // Measured on the finger's pixels alone (buffers swapped, not copied).
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
+        let axis = self.axis_along(background, c, e, Some(part.root_px));
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
+        if axis.is_err() {
+            self.finger_pixels.clear();
+        }
+        let mut axis = axis.ok()?;
+        // A line on a short finger is uncertain in angle beyond its sections' scatter: each end
+        // of the measured part is good to about a third of a pixel (the edges' grey, the
+        // fingertip's and the knuckles' end faces).
+        let length = (axis.tip_px[0] - axis.tail_px[0]).hypot(axis.tip_px[1] - axis.tail_px[1]).max(1.0);
+        axis.angle_sigma_rad = axis.angle_sigma_rad.max(0.5 / length);
+        axis.offset_sigma_px = axis.offset_sigma_px.max(0.25);
+        Some(axis)
+    }
+
+    /// The midline of `pixels` measured in cross-sections across `e` (unit) through `c`, fitted
+    /// three times (each time across the line the last fit found). The tip is the narrow end,
+    /// or with `root_px` (where a finger part joins the hand) the end away from it.
+    fn axis_along(&mut self, background: &ImageView, c: [f64; 2], e: [f64; 2], root_px: Option<[f64; 2]>) -> Result<ArmAxis, SilhouetteError> {
         // Sections across the principal direction first, then again across the line that
         // fit found (a short, cut-off silhouette's principal direction can be well off).
-        let (mut c, mut e) = ([cx, cy], [theta.cos(), theta.sin()]);
+        let (mut c, mut e) = (c, e);
         let mut fit = self.fit_sections(background, c, e)?;
         for _ in 0..2 {
             let n = [-e[1], e[0]];
@@ -164,7 +209,12 @@ impl SilhouetteFinder {
         let centre_px = to_image(fit.s_mean, fit.at(fit.s_mean));
         let dir = [ex + fit.b * nx, ey + fit.b * ny];
         let line = ImageLine::along(&centre_px, &dir).map_err(|_| SilhouetteError::NotElongated)?;
-        // The tip: the narrower end (a finger against a hand and a forearm).
+        // The tip: the narrower end (a finger against a hand and a forearm), or the end away
+        // from the finger's root.
+        if let Some(root) = root_px {
+            let s_root = (root[0] - cx) * ex + (root[1] - cy) * ey;
+            self.tip_at_start = s_root > 0.5 * (fit.s_min + fit.s_max);
+        }
         let tip_at_start = self.tip_at_start;
         // The tip lies at the silhouette's last section at that end (the measured sections
         // stop short of it, at the fingertip's end face).
@@ -184,8 +234,8 @@ impl SilhouetteFinder {
             tip_px: to_image(s_tip, fit.at(s_tip)),
             tail_px: to_image(s_tail, fit.at(s_tail)),
             centre_px,
-            centroid_px: [sx / n as f64, sy / n as f64],
-            pixels: n,
+            centroid_px: centre_px,
+            pixels: self.pixels.len(),
             sections: fit.count,
             angle_sigma_rad: fit.b_sigma,
             offset_sigma_px: fit.a_sigma,
@@ -361,74 +411,31 @@ impl SilhouetteFinder {
     }
 }
 
-/// `t = a + b (s - s_mean)` fitted to the selected midpoints, with its standard errors.
-#[derive(Debug, Clone, Copy)]
-struct LineFit {
-    a: f64,
-    b: f64,
-    s_mean: f64,
-    s_min: f64,
-    s_max: f64,
-    count: usize,
-    a_sigma: f64,
-    b_sigma: f64,
-}
-
-impl LineFit {
-    fn at(&self, s: f64) -> f64 {
-        self.a + self.b * (s - self.s_mean)
-    }
-}
-
-/// Least squares, then again three times without the sections more than 3 mean deviations
-/// (at least 1 px) off the line.
-fn robust_fit(mids: &[[f64; 3]]) -> LineFit {
-    let mut fit = fit_line(mids, |_| true);
-    for _ in 0..3 {
-        let dev = mids.iter().map(|m| (m[1] - fit.at(m[0])).abs()).sum::<f64>() / mids.len().max(1) as f64;
-        let limit = (3.0 * 1.25 * dev).max(1.0);
-        fit = fit_line(mids, |m| (m[1] - fit.at(m[0])).abs() <= limit);
-    }
-    fit
-}
-
-fn fit_line(mids: &[[f64; 3]], keep: impl Fn(&[f64; 3]) -> bool) -> LineFit {
-    let (mut n, mut ss, mut st) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut s_min, mut s_max) = (f64::INFINITY, f64::NEG_INFINITY);
-    for m in mids.iter().filter(|m| keep(m)) {
-        n += 1.0;
-        ss += m[0];
-        st += m[1];
-        s_min = s_min.min(m[0]);
-        s_max = s_max.max(m[0]);
-    }
-    let (s_mean, t_mean) = (ss / n.max(1.0), st / n.max(1.0));
-    let (mut sss, mut sst) = (0.0, 0.0);
-    for m in mids.iter().filter(|m| keep(m)) {
-        sss += (m[0] - s_mean).powi(2);
-        sst += (m[0] - s_mean) * (m[1] - t_mean);
-    }
-    let b = if sss > 0.0 { sst / sss } else { 0.0 };
-    let mut rss = 0.0;
-    for m in mids.iter().filter(|m| keep(m)) {
-        rss += (m[1] - t_mean - b * (m[0] - s_mean)).powi(2);
-    }
-    // Neighbouring sections share pixels' noise: count them as half as many independent ones.
-    let sigma = (rss / (n - 2.0).max(1.0)).sqrt() * std::f64::consts::SQRT_2;
-    LineFit {
-        a: t_mean,
-        b,
-        s_mean,
-        s_min,
-        s_max,
-        count: n as usize,
-        a_sigma: sigma / n.max(1.0).sqrt(),
-        b_sigma: sigma / sss.max(1e-9).sqrt(),
-    }
-}
-
 /// The grey at the nearest pixel to `(x, y)`, if inside the image.
 fn sample(img: &ImageView, x: f64, y: f64) -> Option<f64> {
     let (xi, yi) = (x.round(), y.round());
     (xi >= 0.0 && yi >= 0.0 && (xi as usize) < img.width() && (yi as usize) < img.height()).then(|| f64::from(img.get(xi as usize, yi as usize)))
+}
+
+/// The centroid, the principal direction (unit) and the elongation (the ratio of the second
+/// moments' square roots) of `pixels`; `None` for a degenerate set.
+fn principal(pixels: &[(u16, u16)]) -> Option<([f64; 2], [f64; 2], f64)> {
+    let n = pixels.len() as f64;
+    let (sx, sy) = pixels.iter().fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + f64::from(x), sy + f64::from(y)));
+    let (cx, cy) = (sx / n, sy / n);
+    let (mut cxx, mut cxy, mut cyy) = (0.0, 0.0, 0.0);
+    for &(x, y) in pixels {
+        let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
+        cxx += dx * dx;
+        cxy += dx * dy;
+        cyy += dy * dy;
+    }
+    let half_diff = 0.5 * (cxx - cyy);
+    let root = (half_diff * half_diff + cxy * cxy).sqrt();
+    let (l1, l2) = (0.5 * (cxx + cyy) + root, 0.5 * (cxx + cyy) - root);
+    if pixels.is_empty() || l2 <= 0.0 {
+        return None;
+    }
+    let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+    Some(([cx, cy], [theta.cos(), theta.sin()], (l1 / l2).sqrt()))
 }

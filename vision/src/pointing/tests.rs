@@ -187,3 +187,58 @@ fn an_empty_scene_is_absent_and_a_blob_is_not_an_arm() {
     }
     assert_eq!(finder.find(&bg[0].view(), &moved.view()), Err(SilhouetteError::NotElongated));
 }
+
+/// `base` with parts of an arm drawn along the unit direction `u` from `tip` (pixels): each
+/// part `(from, to, half width)` px along and across; grey 190.
+fn with_parts(base: &ImageBuf, tip: [f64; 2], u: [f64; 2], parts: &[(f64, f64, f64)]) -> ImageBuf {
+    let mut img = base.clone();
+    for y in 0..H {
+        for x in 0..W {
+            let (px, py) = (x as f64 - tip[0], y as f64 - tip[1]);
+            let (s, t) = (px * u[0] + py * u[1], -px * u[1] + py * u[0]);
+            if parts.iter().any(|&(a, b, half)| (a..=b).contains(&s) && t.abs() <= half) {
+                img.set(x, y, 190);
+            }
+        }
+    }
+    img
+}
+
+#[test]
+fn a_hand_seen_from_the_front_gives_its_finger_line() {
+    // The hand from the front: knuckles 110 px wide over a foreshortened finger 22 px wide and
+    // 55 px long; the sleeve lost against the scene. As a whole a blob (no axis before the
+    // finger was found as a part of its own); the finger is a clear line.
+    let bg = scene(11);
+    let mut rng = SplitMix64::new(3);
+    for (k, angle_deg) in [-100.0f64, -80.0, -60.0, -115.0].into_iter().enumerate() {
+        let u = [angle_deg.to_radians().cos(), angle_deg.to_radians().sin()];
+        let tip = [320.0 + 3.0 * k as f64, 330.0];
+        let frame = noisy(&with_parts(&bg, tip, u, &[(0.0, 55.0, 11.0), (55.0, 125.0, 55.0)]), &mut rng);
+        let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+        let axis = finder.find(&noisy(&bg, &mut rng).view(), &frame.view()).unwrap_or_else(|e| panic!("{angle_deg}°: {e}"));
+        assert!(!finder.finger_part_pixels().is_empty(), "{angle_deg}°: the whole silhouette gave an axis: not a blob");
+        // The line is the finger's axis: through the tip and the hand's middle.
+        let l = axis.line.0;
+        let off = |p: [f64; 2]| l[0] * p[0] + l[1] * p[1] + l[2];
+        let hand = [tip[0] + 90.0 * u[0], tip[1] + 90.0 * u[1]];
+        assert!(off(tip).abs() < 1.0 && off(hand).abs() < 2.0, "{angle_deg}°: line {:.2} px off the tip, {:.2} px off the hand", off(tip), off(hand));
+        assert!((axis.tip_px[0] - tip[0]).hypot(axis.tip_px[1] - tip[1]) < 3.0, "{angle_deg}°: tip {:?}", axis.tip_px);
+        // Measured on the finger alone: its angle is no surer than its length allows.
+        let length = (axis.tip_px[0] - axis.tail_px[0]).hypot(axis.tip_px[1] - axis.tail_px[1]);
+        assert!(length < 60.0 && axis.angle_sigma_rad >= 0.5 / length, "{angle_deg}°: {length} px, angle sigma {}", axis.angle_sigma_rad);
+    }
+}
+
+#[test]
+fn a_sliver_off_a_blob_is_not_taken_for_a_finger() {
+    // A hand seen from the front whose only protrusion is its side face at a grazing angle
+    // (6 px wide): no line, rather than a line along the sliver.
+    let bg = scene(12);
+    let mut rng = SplitMix64::new(4);
+    let u = [0.0, -1.0];
+    let hand = with_parts(&bg, [300.0, 300.0], u, &[(0.0, 75.0, 55.0)]);
+    let frame = noisy(&with_parts(&hand, [300.0 + 52.0, 300.0 - 75.0], u, &[(0.0, 50.0, 3.0)]), &mut rng);
+    let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+    assert_eq!(finder.find(&noisy(&bg, &mut rng).view(), &frame.view()), Err(SilhouetteError::NotElongated));
+}
