@@ -14,7 +14,10 @@
 //! sides stay within them, is on some other edge: it is put back on the planned side's line,
 //! and its tracker stops searching it, so the face is held by the sides the view does see.
 //! When most sides moved, the face itself moved since the stereo pair (a nudged block): the
-//! tracker followed it, and nothing is held.
+//! tracker followed it, and nothing is held. A held side is placed by the sides still
+//! measured; where they do not hold the face (seed 108: a bottom side held, the crease along
+//! the top weak), the outline drifts and the held side with it, off its line by more than the
+//! same tolerance: it is then measured again ([`release_adrift`]).
 
 use handeye_vision::tracker::ContourTracker;
 use nalgebra::Vector2;
