@@ -14,7 +14,10 @@
 //! sides stay within them, is on some other edge: it is put back on the planned side's line,
 //! and its tracker stops searching it, so the face is held by the sides the view does see.
 //! When most sides moved, the face itself moved since the stereo pair (a nudged block): the
-//! tracker followed it, and nothing is held.
+//! tracker followed it, and nothing is held. A held side is placed by the sides still
+//! measured; where they do not hold the face (seed 108: a bottom side held, the crease along
+//! the top weak), the outline drifts and the held side with it, off its line by more than the
+//! same tolerance: it is then measured again ([`release_adrift`]).
 
 use handeye_vision::tracker::ContourTracker;
 use nalgebra::Vector2;
@@ -116,6 +119,44 @@ pub fn hold_to_plan(refined_px: &[[f64; 2]], planned_px: &[[f64; 2]], held_sides
         corners_px.push([c.x, c.y]);
     }
     Some(HeldOutline { corners_px, held_sides: held_sides.to_vec() })
+}
+
+/// The sides of `t` it no longer measures (held to the plan, [`restart_held`]) whose ends now
+/// lie more than `max_shift_px` from their planned line (`planned_px`, in either direction).
+/// A held side is placed by the sides the tracker still measures; where those hold the face
+/// (clutter3 seed 28: the square's three other sides on strong edges) it stays on its line.
+/// Where they do not (seed 108: a face's bottom side held, the sides left to place it
+/// vertically the short ones and the weak crease along its top), the outline drifts off the
+/// face, and the held side with it, past the tolerance the hold was granted on (the planner's
+/// epipolar tolerance plus the tracker's inlier band): the plan's line no longer holds
+/// anything there, and the side must be measured again.
+pub fn held_sides_adrift(t: &ContourTracker, planned_px: &[[f64; 2]], max_shift_px: f64) -> Vec<usize> {
+    let k = planned_px.len();
+    let corners: Vec<Vector2<f64>> = t.corners().collect();
+    if corners.len() != k || k < 3 {
+        return Vec::new();
+    }
+    let planned = |j: usize| v(planned_px[j % k]);
+    (0..k)
+        .filter(|&j| !t.side_measured(j))
+        .filter(|&j| {
+            let (a, b) = (planned(j), planned(j + 1));
+            let d = b - a;
+            let n = d.norm();
+            let off = |p: Vector2<f64>| if n > 0.0 { (d.x * (p.y - a.y) - d.y * (p.x - a.x)).abs() / n } else { (p - a).norm() };
+            off(corners[j]).max(off(corners[(j + 1) % k])) > max_shift_px
+        })
+        .collect()
+}
+
+/// Measures again every held side of `t` that drifted off its planned line
+/// ([`held_sides_adrift`]). Returns the sides released.
+pub fn release_adrift(t: &mut ContourTracker, planned_px: &[[f64; 2]], max_shift_px: f64) -> Vec<usize> {
+    let adrift = held_sides_adrift(t, planned_px, max_shift_px);
+    for &j in &adrift {
+        t.set_side_measured(j, true);
+    }
+    adrift
 }
 
 /// A target tracker's corners refined from its edges ([`crate::gripper::refine_polygon`]),
@@ -242,10 +283,39 @@ mod tests {
         assert!(held.iter().all(Vec::is_empty), "once held, the side stays on the plan");
         assert!(!left.side_measured(3) && left.side_measured(0) && right.side_measured(3));
         step(&mut left, &mut right);
+        assert!(release_adrift(&mut left, &FRONT, max_shift_px).is_empty(), "the held side stays on its line: the hold stands");
         for t in [&left, &right] {
             assert!(worst_corner_px(t, &FRONT) < 1.0, "the face is {} px off", worst_corner_px(t, &FRONT));
             assert!(t.confidence().score > 0.8, "confidence over the sides it measures: {}", t.confidence().score);
         }
+    }
+
+    /// A held side is placed by the sides still measured; one that went with the outline more
+    /// than the tolerance off its planned line (clutter3 seed 108: the bottom side held, the
+    /// outline drifted 7 px up within a frame) is measured again; a held side on its line, and
+    /// a measured side off it, are not touched.
+    #[test]
+    fn a_held_side_adrift_from_the_plan_is_measured_again() {
+        let config = crate::config::TrackerSettings::default().target_tracker_config();
+        let max_shift_px = 3.0 + config.inlier_px;
+        let mut t = ContourTracker::new(config, &FRONT).unwrap();
+        t.set_side_measured(0, false);
+        assert!(held_sides_adrift(&t, &FRONT, max_shift_px).is_empty());
+        // The whole outline 7 px up: the held bottom side (corner 0 to 1) with it, and the
+        // measured sides too (those are the tracker's to follow, not the hold's).
+        let drifted: Vec<[f64; 2]> = FRONT.iter().map(|c| [c[0], c[1] - 7.0]).collect();
+        t.reinit(&drifted).unwrap();
+        assert!(!t.side_measured(0), "reinit keeps the held side unmeasured");
+        assert_eq!(held_sides_adrift(&t, &FRONT, max_shift_px), vec![0]);
+        assert_eq!(release_adrift(&mut t, &FRONT, max_shift_px), vec![0]);
+        assert!((0..4).all(|j| t.side_measured(j)), "the drifted side is measured again");
+        assert!(release_adrift(&mut t, &FRONT, max_shift_px).is_empty(), "released once");
+        // Within the tolerance (4 px at one end) the hold stands.
+        let tilted = [[99.5, 135.5], [139.5, 139.5], [139.5, 99.5], [99.5, 99.5]];
+        let mut t = ContourTracker::new(config, &tilted).unwrap();
+        t.set_side_measured(0, false);
+        assert!(release_adrift(&mut t, &FRONT, max_shift_px).is_empty());
+        assert!(!t.side_measured(0));
     }
 
     /// A block moved since the plan moves every side: that is not a slide; a plan a couple of

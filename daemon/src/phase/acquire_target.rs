@@ -110,6 +110,19 @@ impl AcquireTarget {
                 }
             }
         }
+        // A held side is placed by the sides still measured; where they do not hold the face,
+        // it drifts off its planned line with the outline, and is measured again.
+        if self.frames > half {
+            let max_shift_px = m.cfg.plan.stereo.epipolar_tol_px + m.cfg.tracker.target_tracker_config().inlier_px;
+            for (k, view) in View::ALL.into_iter().enumerate() {
+                if let Some(t) = m.trackers.get_mut(Role::Target, view) {
+                    let released = crate::target_outline::release_adrift(t, &self.planned_px[k], max_shift_px);
+                    if !released.is_empty() {
+                        tracing::info!(?view, sides = ?released, frame = self.frames, "acquire_target: held sides drifted off the plan's outline with the face: measured again");
+                    }
+                }
+            }
+        }
         if self.frames < m.cfg.target.converge_frames {
             return Step::Stay(Cmd::HOLD);
         }
