@@ -642,7 +642,13 @@ impl DaemonConfig {
 impl TrackerSettings {
     /// The configuration of the target's contours.
     pub fn target_tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {
-        handeye_vision::tracker::TrackerConfig { deformation_velocity_gain: self.target_deformation_velocity_gain, ..self.tracker_config() }
+        // The target stands still before still cameras: the plan's shape is its shape, and
+        // a wrong-lock rival must be one the contour bent away from it to slide off.
+        handeye_vision::tracker::TrackerConfig {
+            deformation_velocity_gain: self.target_deformation_velocity_gain,
+            shape_is_fixed: true,
+            ..self.tracker_config()
+        }
     }
 
     pub fn tracker_config(&self) -> handeye_vision::tracker::TrackerConfig {

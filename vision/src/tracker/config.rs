@@ -130,6 +130,15 @@ pub struct TrackerConfig {
     /// wide pass over every point: with `coarse_stride` > 1, or when `short_first_px` skips
     /// the wide pass, the count does not advance.
     pub max_rival_updates: usize,
+    /// The contour's start shape is the face's shape for the whole track (a still object seen
+    /// by still cameras: the daemon's target, placed by the plan): a rival then counts only
+    /// where that shape, placed by the similarity nearest the contour's placement, pulls the
+    /// side towards it (`tracker::wrong_lock`). A side that slid bent the contour out of the
+    /// shape; one beside an edge of a contour that keeps its shape slid off nothing
+    /// (clutter3 seed 127: the block's outline 7 px beyond a faint crease the side holds).
+    /// Off by default: under a moving camera the face's shape changes with the view (on the
+    /// real sequence it would keep 249 of the left face's wrong locks; BENCHMARKS.md).
+    pub shape_is_fixed: bool,
     /// Experimental, off (0) by default: the wide pass of several also fits its edges with
     /// the predicted shape held (translation only); where that puts at least this many more of
     /// the points on an edge (within `inlier_px / 2`) than the full fit, the refinement passes
@@ -202,6 +211,7 @@ impl Default for TrackerConfig {
             rival_margin_points: 3,
             min_rival_offset_px: 5.0,
             max_rival_updates: 10,
+            shape_is_fixed: false,
             min_shape_support_points: 0,
             min_direction_support: 0.35,
             min_inlier_ratio_to_recent: 0.65,

@@ -98,6 +98,10 @@ pub struct ContourTracker {
     lines: ContourSearch,
     /// Scratch: the first pass's fitted contour's offset along each point's search line, px.
     fitted_px: Vec<f64>,
+    /// Per side, where the template's shape under the similarity nearest the contour's
+    /// placement puts it, px from the fitted side at its first and last point (the wrong-lock
+    /// check's `template_px`).
+    template_pull_px: Vec<[f64; 2]>,
     /// The strongest rival edge the first pass of the last update saw.
     rival: super::wrong_lock::Rival,
     /// Updates whose wide pass saw a rival edge outnumber its side's, less those that did not
@@ -187,6 +191,7 @@ impl ContourTracker {
             subset_side: vec![0; n],
             lines: ContourSearch::new(),
             fitted_px: Vec::with_capacity(n),
+            template_pull_px: Vec::with_capacity(sides.max(8)),
             rival: super::wrong_lock::Rival::default(),
             rival_updates: 0,
             unmeasured_sides: 0,
@@ -450,6 +455,10 @@ impl ContourTracker {
     fn find_rival(&mut self, moved: &Placement) {
         let n = self.template.points().len();
         self.fitted_offsets(moved, n);
+        self.template_pull_px.clear();
+        if self.config.shape_is_fixed {
+            self.template_pull(moved);
+        }
         let band_px = 0.5 * self.config.inlier_px;
         self.rival = super::wrong_lock::strongest_rival(
             &self.template.edges,
@@ -462,9 +471,43 @@ impl ContourTracker {
             // count, every other update is enough to see one appear (a wrong lock lasts);
             // once counting, every update.
             self.rival_updates > 0 || self.updates.is_multiple_of(2),
+            &self.template_pull_px,
         );
         let outnumbered = self.rival.outnumbers_its_side(self.config.rival_margin_points);
         self.rival_updates = if outnumbered { self.rival_updates + 1 } else { self.rival_updates.saturating_sub(1) };
+    }
+
+    /// Into `template_pull_px` (after `fitted_offsets` for `moved` over every point): per side,
+    /// the offsets from the fitted side, at its first and last point along their search lines,
+    /// of the side of the template's own shape placed by the similarity nearest to `moved`'s
+    /// change of shape since the start (the same origin; rotation and scale the mean of the
+    /// deformation's, no perspective). A contour that keeps its template's shape has them near
+    /// 0; one with a side slid off its edge has its shape bent by the slide, and these point
+    /// back towards the edge it left.
+    fn template_pull(&mut self, moved: &Placement) {
+        self.template_pull_px.clear();
+        let d = moved.frame.basis() * self.initial_basis_inv;
+        let (p, q) = (0.5 * (d[(0, 0)] + d[(1, 1)]), 0.5 * (d[(1, 0)] - d[(0, 1)]));
+        let similar = Matrix2::new(p, -q, q, p) * self.initial_basis_inv.try_inverse().unwrap_or_else(Matrix2::identity);
+        let shape = Placement::affine(TemplateFrame::new(moved.frame.origin, similar.column(0).into(), similar.column(1).into()));
+        let cross = |u: Vector2<f64>, v: Vector2<f64>| u.x * v.y - u.y * v.x;
+        for edge in &self.template.edges {
+            if edge.count == 0 {
+                self.template_pull_px.push([0.0; 2]);
+                continue;
+            }
+            let a = shape.image_from_template(edge.start);
+            let t = shape.image_from_template(edge.start + edge.tangent) - a;
+            let pull = |i: usize| {
+                let (p, normal) = (Vector2::new(self.pos_x[i], self.pos_y[i]), Vector2::new(self.nrm_x[i], self.nrm_y[i]));
+                let along = cross(t, normal);
+                let at = if along.abs() > 1e-9 * t.norm() { cross(t, a - p) / along } else { f64::INFINITY };
+                // Not finite (a side edge-on to its normal): no pull either way.
+                let d = at - self.fitted_px[i];
+                if d.is_finite() { d } else { 0.0 }
+            };
+            self.template_pull_px.push([pull(edge.first), pull(edge.first + edge.count - 1)]);
+        }
     }
 
     /// Places the points for `placement` and searches their normals: every point, or with

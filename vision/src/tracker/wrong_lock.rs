@@ -23,6 +23,29 @@ const RIVAL_BINS: usize = 95;
 /// 1.25 px on average: inside the band a point's edge must fall in.
 const TURNS_PX: [f64; 9] = [0.0, -5.0, 5.0, -10.0, 10.0, -15.0, 15.0, -20.0, 20.0];
 
+/// Least displacement of the template's shape towards a rival, px, for the rival to count
+/// (see [`strongest_rival`]'s `template_px`): above the sub-px wobble of a steady fit's
+/// deformation, below the quarter of a 6 px slide that the shape shows (a quadrilateral's side
+/// slid `s` px out stretches the contour, whose nearest similarity puts that side `s / 4` px
+/// back towards where it was).
+const MIN_TEMPLATE_PULL_PX: f64 = 1.0;
+
+/// The same as a fraction of the rival's mean distance from its side (a far rival needs the
+/// shape to show more of the slide).
+const MIN_TEMPLATE_PULL_FRACTION: f64 = 0.15;
+
+/// Whether a rival line (offsets `r0`, `r1` from the fitted side at its first and last point)
+/// lies where the template's shape pulls the side (`d`: the same offsets of the side of the
+/// template's shape under the contour's nearest similarity): their displacement along the
+/// rival's, averaged with the rival's offsets as weights, is at least
+/// [`MIN_TEMPLATE_PULL_PX`] and [`MIN_TEMPLATE_PULL_FRACTION`] of the rival's mean offset.
+#[inline]
+fn template_pulls_towards(r0: f64, r1: f64, d: [f64; 2]) -> bool {
+    let weight = r0.abs() + r1.abs();
+    let pull = (r0 * d[0] + r1 * d[1]) / weight.max(1e-9);
+    pull >= MIN_TEMPLATE_PULL_PX.max(MIN_TEMPLATE_PULL_FRACTION * 0.5 * weight)
+}
+
 /// The side with the strongest rival edge after a wide pass.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct Rival {
@@ -69,6 +92,16 @@ impl Rival {
 /// points without its edge, or without an edge at all, is not searched for rivals (the turned
 /// lines cost ~9 histograms a side). Allocates
 /// nothing.
+///
+/// `template_px[s]` (when not empty): where the template's own shape, placed by the similarity
+/// nearest to the contour's placement, puts side `s`, as offsets from the fitted side at its
+/// first and last point. Only a line the template's shape pulls the side towards is a rival:
+/// a side that slid off its edge onto another has bent the contour out of the template's
+/// shape by the slide, and the shape points back to the edge it left (the edge is the rival);
+/// a contour that keeps the template's shape has slid off nothing, and an edge beside its side
+/// is a neighbouring face's, the face's own other edge seen through the band, a shadow or the
+/// gripper's plate: nothing it could have slid from (clutter3 seed 127: the block's outline
+/// 7 px beyond a faint crease the side holds, on every update from the first).
 pub(crate) fn strongest_rival(
     sides: &[TemplateEdge],
     edges: &[PointEdges],
@@ -77,6 +110,7 @@ pub(crate) fn strongest_rival(
     min_offset_px: f64,
     margin: usize,
     turned: bool,
+    template_px: &[[f64; 2]],
 ) -> Rival {
     let turns = if turned { &TURNS_PX[..] } else { &TURNS_PX[..1] };
     let half = (RIVAL_BINS / 2) as i64;
@@ -132,9 +166,14 @@ pub(crate) fn strongest_rival(
             }
             // A line qualifies where it is far enough from the side at one end (`o ± turn/2`).
             let reach = 0.5 * turn_px.abs();
+            let pull = template_px.get(s).copied();
             for (b, &v) in votes.iter().enumerate() {
                 let o = b as i64 - half;
-                if (o as f64).abs() + reach >= min_offset && usize::from(v) > rival {
+                let ends = (o as f64 - 0.5 * turn_px, o as f64 + 0.5 * turn_px);
+                if (o as f64).abs() + reach >= min_offset
+                    && usize::from(v) > rival
+                    && pull.is_none_or(|d| template_pulls_towards(ends.0, ends.1, d))
+                {
                     (rival, offset, turn) = (usize::from(v), o, turn_px);
                 }
             }
@@ -188,7 +227,7 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]);
         assert_eq!((r.side, r.support), (0, 8), "{r:?}");
         assert!(r.rival >= 19 && (r.offset_px - 7.0).abs() <= 1.0, "{r:?}");
     }
@@ -205,7 +244,7 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]);
         assert!(r.support == 1 && r.rival >= 19, "{r:?}");
         assert!(!r.outnumbers_its_side(3), "{r:?}");
         // On an edge 8 of its points see, the same rival is a wrong lock.
@@ -216,8 +255,45 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]);
         assert!(r.support == 8 && r.outnumbers_its_side(3), "{r:?}");
+    }
+
+    #[test]
+    fn an_edge_beside_a_side_of_a_contour_that_keeps_its_template_shape_is_no_rival() {
+        // Clutter3 seed 127: the side holds a faint crease between the target face and a
+        // narrow side face of nearly its grey (6 of 24 points see it); the block's outline
+        // 7 px further out, every point sees. The contour has the planned face's shape: the
+        // template's side lies on the fitted side, so nothing slid off the outline.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = vec![7.1];
+            if i % 4 == 0 {
+                o.push(0.2);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[[0.3, -0.2]]);
+        assert!(!r.outnumbers_its_side(3), "{r:?}");
+        // The template's shape pulling the other way (inwards) does not make it one either.
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[[-2.0, -2.0]]);
+        assert!(!r.outnumbers_its_side(3), "{r:?}");
+        // A contour stretched by the side's slide 7 px inwards off the outline: its nearest
+        // similarity puts the side ~2 px back out, towards the outline, a rival.
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[[1.8, 1.7]]);
+        assert!(r.outnumbers_its_side(3) && (r.offset_px - 7.0).abs() <= 1.0, "{r:?}");
+        // A turned rival counts where the shape pulls towards its far end: the line 12 px out
+        // at the side's end and 2 px at its start, the shape pulling 3 px out at the end.
+        let (sides, edges, fitted) = side(24, |i| {
+            let mut o = vec![2.0 + 10.0 * i as f32 / 23.0];
+            if i % 4 == 0 {
+                o.push(0.2);
+            }
+            o
+        });
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[[0.2, 3.0]]);
+        assert!(r.outnumbers_its_side(3) && r.turn_px >= 5.0, "{r:?}");
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[[0.2, -0.3]]);
+        assert!(!r.outnumbers_its_side(3), "{r:?}");
     }
 
     #[test]
@@ -236,7 +312,7 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]);
         assert_eq!(r.support, 10, "{r:?}");
         assert!(r.rival >= 18, "{r:?}");
         assert!((r.turn_px - 12.0).abs() <= 2.5 && (r.offset_px + 2.0).abs() <= 1.5, "{r:?}");
@@ -257,14 +333,14 @@ mod tests {
             }
             o
         });
-        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true);
+        let r = strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]);
         assert_eq!(r.support, 16, "{r:?}");
         assert!(r.rival < r.support + 3, "{r:?}");
         // A side whose every point sees its edge has no rival to search for.
         let (sides, edges, fitted) = side(24, |i| vec![0.2, 3.1, 5.0 + (i * 7 % 6) as f32, -5.0 - (i * 5 % 6) as f32]);
-        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true).rival, 0);
+        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]).rival, 0);
         // A point with two candidates on the same line counts once.
         let (sides, edges, fitted) = side(24, |_| vec![6.0, 6.4]);
-        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true).rival, 24);
+        assert_eq!(strongest_rival(&sides, &edges, &fitted, 1.0, 5.0, 3, true, &[]).rival, 24);
     }
 }
