@@ -23,7 +23,7 @@ pub mod watch;
 
 use handeye_vision::affine::EpipolarConstraint;
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, View};
+use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TrackerConfig, View};
 use handeye_wire::hint::OperatorHint;
 use handeye_wire::{monotonic_ns, Phase, Telemetry, NO_FRAME, TELEMETRY_CORNERS};
 
@@ -118,7 +118,10 @@ impl ObserveLoop {
         for (role, hint, which) in hints {
             let Some(hint) = hint else { continue };
             let (tracker_cfg, converge, min) = match role {
-                Role::Target => (cfg.tracker.target_tracker_config(), cfg.target.converge_frames, target_min),
+                // Observe mode knows nothing of how the cameras move (a hand-held camera changes
+                // the face's shape with the view), so the target's start shape is no reference
+                // for the wrong-lock check here.
+                Role::Target => (TrackerConfig { shape_is_fixed: false, ..cfg.tracker.target_tracker_config() }, cfg.target.converge_frames, target_min),
                 Role::Gripper => (cfg.plate_tracker_config(), cfg.acquire.converge_frames, cfg.safety.min_tracker_score),
             };
             for (view, poly, side) in [(View::Left, &hint.left_px, "left"), (View::Right, &hint.right_px, "right")] {
