@@ -12,6 +12,9 @@ use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, EpipolarGeome
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use serde_json::{json, Value};
 
+// An explicit path: `tests/fuzz_geometry.rs` includes this file with `#[path]`, where a bare
+// `mod replay;` would be looked for beside it (src/cli/replay.rs) instead of under plan/.
+#[path = "plan/replay.rs"]
 mod replay;
 
 const PLAN_HELP: &str = "\

@@ -11,7 +11,8 @@ use handeye_vision::image::ImageBuf;
 
 /// A saved view as 8-bit grey (the same reader as `handeye plan --left`).
 fn load_gray(path: &Path) -> Result<ImageBuf> {
-    let img = crate::cli::png::read_gray(path)?;
+    // cli's png (or the fuzz test's own, where it includes plan.rs at its root).
+    let img = super::super::png::read_gray(path)?;
     let (w, h) = img.dimensions();
     ImageBuf::from_vec(img.into_raw(), w as usize, h as usize).with_context(|| format!("image {} is empty", path.display()))
 }
