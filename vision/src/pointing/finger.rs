@@ -55,6 +55,18 @@ struct Component {
     root: (f64, f64, f64),
 }
 
+impl Component {
+    /// Centroid and second central moments `(mx, my, cxx, cxy, cyy)`, px; `None` for fewer
+    /// than 3 cells (no meaningful direction).
+    fn central_moments(&self) -> Option<(f64, f64, f64, f64, f64)> {
+        if self.n < 3.0 {
+            return None;
+        }
+        let (mx, my) = (self.sx / self.n, self.sy / self.n);
+        Some((mx, my, self.sxx / self.n - mx * mx, self.sxy / self.n - mx * my, self.syy / self.n - my * my))
+    }
+}
+
 impl FingerFinder {
     /// The finger part of the silhouette `pixels` of a `w` x `h` image, its pixels in `out`:
     /// the largest thin protrusion (elongated at least `min_elongation`, at least
@@ -317,15 +329,10 @@ impl FingerFinder {
 /// Where a component's cells next to the opened silhouette lie along its principal
 /// direction, from its centroid, px (`None` without such cells or for a degenerate component).
 fn root_along(c: &Component) -> Option<f64> {
-    if c.root.0 < 1.0 || c.n < 3.0 {
+    if c.root.0 < 1.0 {
         return None;
     }
-    let (mx, my) = (c.sx / c.n, c.sy / c.n);
-    let (cxx, cxy, cyy) = (
-        c.sxx / c.n - mx * mx,
-        c.sxy / c.n - mx * my,
-        c.syy / c.n - my * my,
-    );
+    let (mx, my, cxx, cxy, cyy) = c.central_moments()?;
     let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
     Some((c.root.1 / c.root.0 - mx) * theta.cos() + (c.root.2 / c.root.0 - my) * theta.sin())
 }
@@ -333,15 +340,7 @@ fn root_along(c: &Component) -> Option<f64> {
 /// A component's length and width (a uniform bar's, from its second moments) and
 /// elongation, px; `None` for fewer than 3 cells.
 fn shape(c: &Component) -> Option<(f64, f64, f64)> {
-    if c.n < 3.0 {
-        return None;
-    }
-    let (mx, my) = (c.sx / c.n, c.sy / c.n);
-    let (cxx, cxy, cyy) = (
-        c.sxx / c.n - mx * mx,
-        c.sxy / c.n - mx * my,
-        c.syy / c.n - my * my,
-    );
+    let (_, _, cxx, cxy, cyy) = c.central_moments()?;
     let half_diff = 0.5 * (cxx - cyy);
     let root = (half_diff * half_diff + cxy * cxy).sqrt();
     let (l1, l2) = (
