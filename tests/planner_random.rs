@@ -29,7 +29,7 @@ use handeye_sim::Scenario;
 use handeye_vision::planner::edges::{EdgeDetector, EdgeMap};
 use handeye_vision::planner::geom::{self, P2};
 use handeye_vision::planner::segments::Segment;
-use handeye_vision::planner::{Planner, PlannerConfig};
+use handeye_vision::planner::Planner;
 use planner_sim_support::*;
 
 /// Smallest visible area (px, in both views) of a face the measure counts.
@@ -110,7 +110,8 @@ fn contrast(snap: &Snapshot, ids: &FaceIds, face: usize) -> f64 {
     if nin == 0.0 || nout == 0.0 { 0.0 } else { (sin / nin - sout / nout).abs() }
 }
 
-fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row>) {
+/// Measures one cell; returns its spurious facets (overlapping no block face, plate or arm).
+fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row>) -> usize {
     let scenario_path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/random.toml"));
     let out = dir.join(format!("seed-{seed}"));
     let o = Command::new(env!("CARGO_BIN_EXE_handeye"))
@@ -145,7 +146,8 @@ fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row
         if f.visible_px[0] < MIN_FACE_PX || f.visible_px[1] < MIN_FACE_PX {
             continue;
         }
-        let found = plan.facets.iter().any(|r| both[0].iou(&r.facet.left, fi) >= MIN_IOU && both[1].iou(&r.facet.right, fi) >= MIN_IOU);
+        let iou_at_least = |t: f64| plan.facets.iter().any(|r| both[0].iou(&r.facet.left, fi) >= t && both[1].iou(&r.facet.right, fi) >= t);
+        let (found, outlined) = (iou_at_least(MIN_IOU), iou_at_least(SPURIOUS_IOU));
         let mut stage_ok = [true; 3];
         let mut seg_ids: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
         for v in 0..2 {
@@ -176,12 +178,15 @@ fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row
             "segments"
         } else if !stage_ok[2] {
             "match"
+        } else if outlined {
+            "outline"
         } else {
             "facet"
         };
         let size_px = f.visible_px[0].min(f.visible_px[1]).sqrt();
         rows.push(Row { seed, label: f.label.clone(), size_px, contrast: contrast(&snap, &ids[0], fi), noise, found, lost_at });
     }
+    score(&snap, &plan).spurious()
 }
 
 #[test]
@@ -190,10 +195,10 @@ fn randomised_cells_found_faces() {
     let (first, n) = (env_u64("FIRST_SEED", 1), env_u64("SEEDS", 20));
     let scratch = Scratch::new("planner-random");
     let mut planner = Planner::new(config_from_env());
-    let _ = PlannerConfig::default();
     let mut rows = Vec::new();
+    let mut spurious = 0;
     for seed in first..first + n {
-        measure_seed(seed, &scratch.0, &mut planner, &mut rows);
+        spurious += measure_seed(seed, &scratch.0, &mut planner, &mut rows);
     }
     let mut text = String::new();
     for r in &rows {
@@ -216,7 +221,7 @@ fn randomised_cells_found_faces() {
             let found = sel.iter().filter(|r| r.found).count();
             let lost = |s: &str| sel.iter().filter(|r| r.lost_at == s).count();
             t += &format!(
-                "  [{:5.1}, {:5.1}): {:3} faces, found {:3} ({:5.1}%), lost at edges {} segments {} match {} facet {}\n",
+                "  [{:5.1}, {:5.1}): {:3} faces, found {:3} ({:5.1}%), lost at edges {} segments {} match {} facet {} outline {}\n",
                 w[0],
                 w[1],
                 sel.len(),
@@ -225,7 +230,8 @@ fn randomised_cells_found_faces() {
                 lost("edges"),
                 lost("segments"),
                 lost("match"),
-                lost("facet")
+                lost("facet"),
+                lost("outline")
             );
         }
         t
@@ -234,6 +240,12 @@ fn randomised_cells_found_faces() {
     text += &bins("by contrast (grey levels)", &|r| r.contrast, &[0.0, 4.0, 8.0, 16.0, 32.0, 1e9]);
     text += &bins("by contrast / noise sigma", &|r| r.contrast / r.noise.max(1e-6), &[0.0, 2.0, 4.0, 8.0, 16.0, 1e9]);
     let found = rows.iter().filter(|r| r.found).count();
-    text += &format!("total: seeds {first}..{}, found {found} of {} faces ({:.1}%)\n", first + n - 1, rows.len(), 100.0 * found as f64 / rows.len().max(1) as f64);
+    text += &format!(
+        "total: seeds {first}..{}, found {found} of {} faces ({:.1}%), {spurious} spurious facets ({:.2} per cell)\n",
+        first + n - 1,
+        rows.len(),
+        100.0 * found as f64 / rows.len().max(1) as f64,
+        spurious as f64 / n.max(1) as f64
+    );
     println!("{text}");
 }
