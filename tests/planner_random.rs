@@ -169,7 +169,9 @@ fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row
             stage_ok[1] &= with_segs >= need && need > 0;
             seg_ids[v] = ss;
         }
-        stage_ok[2] = plan.matches.iter().any(|m| seg_ids[0].contains(&(m.left as usize)) && seg_ids[1].contains(&(m.right as usize)));
+        let on_face: Vec<_> = plan.matches.iter().filter(|m| seg_ids[0].contains(&(m.left as usize)) && seg_ids[1].contains(&(m.right as usize))).collect();
+        stage_ok[2] = !on_face.is_empty();
+        let in_plane = on_face.iter().filter(|m| !m.planes.is_empty()).count() >= 2;
         let lost_at = if found {
             "-"
         } else if !stage_ok[0] {
@@ -180,6 +182,8 @@ fn measure_seed(seed: u64, dir: &Path, planner: &mut Planner, rows: &mut Vec<Row
             "match"
         } else if outlined {
             "outline"
+        } else if !in_plane {
+            "plane"
         } else {
             "facet"
         };
@@ -221,7 +225,7 @@ fn randomised_cells_found_faces() {
             let found = sel.iter().filter(|r| r.found).count();
             let lost = |s: &str| sel.iter().filter(|r| r.lost_at == s).count();
             t += &format!(
-                "  [{:5.1}, {:5.1}): {:3} faces, found {:3} ({:5.1}%), lost at edges {} segments {} match {} facet {} outline {}\n",
+                "  [{:5.1}, {:5.1}): {:3} faces, found {:3} ({:5.1}%), lost at edges {} segments {} match {} plane {} facet {} outline {}\n",
                 w[0],
                 w[1],
                 sel.len(),
@@ -230,6 +234,7 @@ fn randomised_cells_found_faces() {
                 lost("edges"),
                 lost("segments"),
                 lost("match"),
+                lost("plane"),
                 lost("facet"),
                 lost("outline")
             );
