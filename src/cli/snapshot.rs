@@ -20,8 +20,11 @@ use handeye_sim::{Scenario, Simulator};
 ///
 /// Ground truth is for judging and testing only; the daemon never sees it.
 ///
-/// Example:
+/// Examples:
 ///   handeye snapshot scenarios/pick_cube.toml --out out/snap
+///   handeye snapshot scenarios/random.toml --seed 7 --randomize --out out/cell7
+///       (the work cell `handeye run --seed 7 --randomize` and `handeye batch --randomize`
+///        draw for seed 7: cameras, light, shades, blocks, noise and blur)
 #[derive(Args)]
 pub struct SnapshotArgs {
     /// Scenario file (TOML), e.g. scenarios/pick_cube.toml.
@@ -38,11 +41,23 @@ pub struct SnapshotArgs {
     /// lifted in the gripper.
     #[arg(long)]
     scripted_pick: bool,
+    /// Lay the scenario out as `handeye sim --seed N` does: the target moved a little, or with
+    /// --random-layout / --randomize the layout or whole work cell that seed draws.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// With --seed: a random layout of the scenario's blocks (as `handeye batch` runs).
+    #[arg(long, requires = "seed", conflicts_with = "randomize")]
+    random_layout: bool,
+    /// With --seed: draw the whole work cell from the scenario's [randomize] ranges (as
+    /// `handeye batch --randomize` runs; see scenarios/random.toml).
+    #[arg(long, requires = "seed")]
+    randomize: bool,
 }
 
 pub fn run(args: SnapshotArgs) -> Result<()> {
     crate::cli::sim::quiet_mesa();
-    let scenario = Scenario::load(&args.scenario)?;
+    let mut scenario = Scenario::load(&args.scenario)?;
+    crate::cli::sim::lay_out(&mut scenario, &args.scenario, args.seed, args.random_layout, args.randomize, false)?;
     let mut sim = Simulator::new(scenario)?;
     let target = sim.target_index();
     let mut script = args.scripted_pick.then(|| GroundTruthPick::new(&sim, target, 0.07, 1e6));

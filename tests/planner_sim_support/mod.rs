@@ -449,7 +449,8 @@ fn corner_shows(snap: &Snapshot, ids: &[FaceIds; 2], face: usize, corner: [f64; 
 pub use handeye_vision::planner::score::median;
 
 /// The planner configuration with the diagnostics' overrides from the environment
-/// (EDGE_LOW, EDGE_HIGH, EPI_TOL, LINE_TOL, BOOT, FLIP, JMIN, JREL, JGAP, MINSEG, TOUCH, JOIN).
+/// (EDGE_LOW, EDGE_HIGH, EPI_TOL, LINE_TOL, BOOT, FLIP, JMIN, JREL, JGAP, MINSEG, TOUCH, JOIN,
+/// SUPPORT, SEG_MINLEN, SEG_MINPTS, AREA, MEMBERS, ANCHOR, ANISO).
 pub fn config_from_env() -> handeye_vision::planner::PlannerConfig {
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     let mut cfg = handeye_vision::planner::PlannerConfig::default();
@@ -465,6 +466,13 @@ pub fn config_from_env() -> handeye_vision::planner::PlannerConfig {
     if let Some(v) = env("MINSEG") { cfg.facets.min_segments = v as usize; }
     if let Some(v) = env("TOUCH") { cfg.facets.touch_px = v; }
     if let Some(v) = env("JOIN") { cfg.facets.join_px = v; }
+    if let Some(v) = env("SUPPORT") { cfg.planes.min_support_px = v; }
+    if let Some(v) = env("SEG_MINLEN") { cfg.segments.min_length_px = v; }
+    if let Some(v) = env("SEG_MINPTS") { cfg.segments.min_points = v as usize; }
+    if let Some(v) = env("AREA") { cfg.facets.min_area_px = v; }
+    if let Some(v) = env("MEMBERS") { cfg.planes.min_members = v as usize; }
+    if let Some(v) = env("ANCHOR") { cfg.planes.min_anchor_spread_px = v; }
+    if let Some(v) = env("ANISO") { cfg.planes.max_anisotropy = v; }
     cfg
 }
 
