@@ -8,7 +8,9 @@
 //! turn on where it was and where its filter's velocity predicts it, the grid widening with
 //! every pass that found nothing (±40, ±80, then ±160 px, repeated). A candidate must pass
 //! the acquisition's verification (the tracker's confidence, its area within ±11 % of the
-//! template's); when every lost contour is back, all must track confidently for
+//! template's; not back on the corners a tracker lost to a wrong lock was refused on: the
+//! last good frame can itself be that lock); when every lost contour is back, all must track
+//! confidently for
 //! [`CONFIRM_FRAMES`] frames (the target's outline refined from its edges halfway, as at
 //! acquisition) before the phase resumes from fresh frames. After `safety.loss_patience_s`
 //! of camera time the run fails, naming what was lost, why, and how the search went. A plate
