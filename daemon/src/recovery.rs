@@ -8,7 +8,9 @@
 //! turn on where it was and where its filter's velocity predicts it, the grid widening with
 //! every pass that found nothing (±40, ±80, then ±160 px, repeated). A candidate must pass
 //! the acquisition's verification (the tracker's confidence, its area within ±11 % of the
-//! template's); when every lost contour is back, all must track confidently for
+//! template's; not back on the corners a tracker lost to a wrong lock was refused on: the
+//! last good frame can itself be that lock); when every lost contour is back, all must track
+//! confidently for
 //! [`CONFIRM_FRAMES`] frames (the target's outline refined from its edges halfway, as at
 //! acquisition) before the phase resumes from fresh frames. After `safety.loss_patience_s`
 //! of camera time the run fails, naming what was lost, why, and how the search went. A plate
@@ -49,6 +51,12 @@ pub const MIN_TARGET_SCORE: f64 = 0.6;
 pub const CONFIRM_FRAMES: u32 = 12;
 /// Largest predicted shift a search is centred on, px.
 const MAX_PREDICTED_SHIFT_PX: f64 = 120.0;
+/// A candidate whose every corner is within this of the shape a tracker was declared wrongly
+/// locked on, px, is that lock again, not a recovery (issue 18: the search's base, the last
+/// steady shape, can itself be the wrong lock; seed 22 of point_clutter3 re-found a strip of
+/// the robot's base 0.7 px from where it was refused). The tracker's own search reaches
+/// ±12 px, so a candidate this close would converge onto the refused lock anyway.
+pub const REFUSED_LOCK_TOL_PX: f64 = 4.0;
 
 /// The last template frame a contour tracked confidently, when (camera ns), and its image
 /// velocity then (px/s).
@@ -73,6 +81,9 @@ struct Slot {
     passes: u32,
     /// Its shift from `base` once found.
     found: Option<Vector2<f64>>,
+    /// The corners it was declared wrongly locked on, when that is why it was lost: a
+    /// candidate back on them is refused.
+    refused: Option<Vec<Vector2<f64>>>,
 }
 
 /// The state of one hold-and-search.
@@ -186,6 +197,16 @@ fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTra
     true
 }
 
+/// How the tracker words a loss to a wrong lock (`handeye_vision::tracker`'s lost reason).
+const WRONG_LOCK: &str = "wrong lock";
+
+/// Whether `cand` sits on the `refused` corners (the lock its tracker was declared wrong on):
+/// every corner within [`REFUSED_LOCK_TOL_PX`].
+fn same_lock(cand: &ContourTracker, refused: &[Vector2<f64>]) -> bool {
+    let corners: Vec<Vector2<f64>> = cand.corners().collect();
+    corners.len() == refused.len() && corners.iter().zip(refused).all(|(c, r)| (c - r).norm() <= REFUSED_LOCK_TOL_PX)
+}
+
 /// Index of a (role, view) slot, in telemetry order: gripper left, gripper right, target
 /// left, target right.
 pub fn slot_index(role: Role, view: View) -> usize {
@@ -224,9 +245,10 @@ impl Recovery {
             Some(g) => (g.frame, g.time_ns, Vector2::from(g.velocity_px_s)),
             None => (tracker.frame(), now_ns, Vector2::zeros()),
         };
+        let refused = why.starts_with(WRONG_LOCK).then(|| tracker.corners().collect());
         trackers.set_active(role, view, false);
         let search = ShiftSearch::new(settings(0), base, Vector2::zeros());
-        self.slots.push(Slot { role, view, why: why.to_string(), base, lost_ns, velocity_px_s, search, passes: 0, found: None });
+        self.slots.push(Slot { role, view, why: why.to_string(), base, lost_ns, velocity_px_s, search, passes: 0, found: None, refused });
         self.confirmed = None;
     }
 
@@ -349,7 +371,9 @@ impl Recovery {
             let min = self.min_candidate(role);
             let slot = &mut self.slots[i];
             let set: &StereoTrackerSet = trackers;
-            match slot.search.step_where(base, image, |cand| plausible(cand, role, view, set, epipolar)) {
+            let refused = slot.refused.as_deref();
+            let accept = |cand: &ContourTracker| plausible(cand, role, view, set, epipolar) && !refused.is_some_and(|r| same_lock(cand, r));
+            match slot.search.step_where(base, image, accept) {
                 SearchStep::Searching => {}
                 SearchStep::Done(Some(best)) if best.score >= min => {
                     tracing::debug!(who = %name(role, view), score = best.score, shift = ?best.shift_px, "candidate taken");

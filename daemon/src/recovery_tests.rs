@@ -139,3 +139,29 @@ fn a_plate_located_by_the_jaws_is_confirmed_and_reported_with_its_shift() {
     let d = shifts_px[slot_index(Role::Gripper, View::Right)].expect("the plate's shift");
     assert!((d[0] - 20.0).abs() < 1.0 && d[1].abs() < 1.0, "{d:?}");
 }
+
+#[test]
+fn a_candidate_back_on_the_refused_wrong_lock_is_no_recovery() {
+    // The right plate tracker was declared wrongly locked where it sits (the search's base,
+    // its last steady shape, is that same lock: point_clutter3 seed 22's strip of the robot
+    // base). The same shape is still in the image; the search must not take it back.
+    let still = scene(0, 0, 0, false);
+    let (mut set, good) = trackers(&still);
+    let why = "wrong lock: side 3 is on an edge 4 of its points found".to_string();
+    let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, why)], &good, 0, 10.0, [0.6, 0.45]);
+    assert_eq!(run(&mut rec, &mut set, &still, &still, 60), RecoveryStep::Searching, "the refused lock is not re-found");
+    assert!(rec.plate_missing() && !set.is_active(Role::Gripper, View::Right), "the arm keeps holding for the plate");
+    // Lost for another reason, the same shape is a recovery.
+    let (mut set, good) = trackers(&still);
+    let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, "support fell".to_string())], &good, 0, 10.0, [0.6, 0.45]);
+    assert!(matches!(run(&mut rec, &mut set, &still, &still, 60), RecoveryStep::Recovered { .. }));
+    // Refused at its old place, the plate moved 30 px on is found there.
+    let (mut set, good) = trackers(&still);
+    let why = "wrong lock: side 0".to_string();
+    let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, why)], &good, 0, 10.0, [0.6, 0.45]);
+    let moved = scene(30, 0, 0, false);
+    let step = run(&mut rec, &mut set, &still, &moved, 60);
+    let RecoveryStep::Recovered { shifts_px, .. } = step else { panic!("{step:?}") };
+    let d = shifts_px[slot_index(Role::Gripper, View::Right)].expect("the plate's shift");
+    assert!((d[0] - 30.0).abs() < 1.0 && d[1].abs() < 1.0, "{d:?}");
+}
