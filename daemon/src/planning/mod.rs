@@ -844,6 +844,18 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_points_height_error_is_the_pixel_error_over_the_pixels_a_height_moves_it() {
+        // 1000 px a metre of height in the left view, 600 in the right: the left one counts.
+        let project = |q: &Vector3<f64>| [[0.0, -1000.0 * q.z], [0.0, -600.0 * q.z]];
+        let sigma_m = point_sigma_m(0.5, &project, &Vector3::zeros());
+        let expected_m = (0.5f64.powi(2) + SEGMENT_FIT_PX.powi(2)).sqrt() / 1000.0;
+        assert!((sigma_m - expected_m).abs() < 1e-9, "{sigma_m} vs {expected_m}");
+        // No parallax (or no finite projection): an error so large that no rule settles.
+        assert!(point_sigma_m(0.5, &|_: &Vector3<f64>| [[1.0, 1.0], [1.0, 1.0]], &Vector3::zeros()) >= 0.01);
+        assert!(point_sigma_m(0.5, &|_: &Vector3<f64>| [[f64::NAN, 0.0], [0.0, 0.0]], &Vector3::zeros()) >= 0.01);
+    }
+
+    #[test]
     fn the_scene_model_puts_a_point_where_the_reference_point_would_image_it() {
         // Model: u = 1000 x + 100, v = −1000 z + 200, u' = 1000 x + 50 y + 90, v' = −1000 z + 200.
         let mut m = nalgebra::Matrix4x3::zeros();
