@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use handeye_vision::planner::geom::{self, simplify_closed, tracker_order};
 use handeye_vision::affine::AffineStereo;
-use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, refusal_grounded, scene_from_plan, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
+use handeye_vision::grasp::{hypothesise_front_faces, plan_grasps, refusal_grounded, scene_from_plan, sloping_top_rad, why_no_grasp, EdgeRef, FeatureRef, Grasp, GraspConfig, PlannedScene, RejectReason, Rejection};
 use handeye_vision::image::ImageBuf;
 use handeye_vision::planner::{Planner, PlannerConfig, EpipolarGeometry};
 use nalgebra::{Vector3, Vector4};
@@ -297,6 +297,7 @@ pub fn reason_name(r: &RejectReason) -> &'static str {
         RejectReason::TurnedFromViewer { .. } => "turned_from_cameras",
         RejectReason::NoTopEdge => "no_top_edge",
         RejectReason::TopEdgeTooSteep { .. } => "top_edge_too_steep",
+        RejectReason::TopEdgeSlopeUnsettled { .. } => "top_edge_slope_unsettled",
         RejectReason::NoOverlap => "no_overlap",
         RejectReason::RearInFront { .. } => "rear_in_front",
         RejectReason::RearOutOfReach { .. } => "rear_out_of_reach",
@@ -516,6 +517,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let lever = Vector3::from(req.calibration.lever_m);
     let points: Vec<Vector3<f64>> = req.calibration.cage_robot_m.iter().map(|x| x - lever).collect();
     let images: Vec<[f64; 4]> = req.calibration.cage_image_px.iter().map(|w| w.map(|v| v + PLANNER_FROM_TRACKER_PX)).collect();
+    let model_residual_px = scene_model.residual_rms_px;
     let mut geo = EpipolarGeometry::from_model(scene_model, req.disparity_margin, req.disparity_margin_px);
     if points.len() >= handeye_vision::planner::projective::MIN_POINTS {
         geo.projective = handeye_vision::planner::projective::ProjectiveStereo::fit(&points, &images).ok();
@@ -659,6 +661,12 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         });
     }
     let indicated = req.scene.indicated_m.map(Vector3::from);
+    // The rules' measures get their error from the calibrated model's residuals (the pinhole
+    // cameras' when fitted: they reconstruct the scene; else the affine model's) and the
+    // segments' fit, at the indicated point's depth ([`point_sigma_m`]).
+    let at = indicated.unwrap_or_else(|| Vector3::new(0.0, 0.0, req.scene.table_z_m));
+    req.grasp.point_sigma_m = point_sigma_m(summary.geometry.projective_residual_px.unwrap_or(model_residual_px), &|q| project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, q), &at);
+    tracing::debug!(point_sigma_mm = req.grasp.point_sigma_m * 1e3, "height error of a reconstructed point");
     let mut grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {
         Ok(g) => g,
         Err(e) => {
@@ -707,6 +715,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
                 RejectReason::FacetNotVertical { tilt_rad } => format!("{name} ({:.0}°)", tilt_rad.to_degrees()),
                 RejectReason::TurnedFromViewer { angle_rad } => format!("{name} ({:.0}°)", angle_rad.to_degrees()),
                 RejectReason::TopEdgeTooSteep { slope_rad } => format!("{name} ({:.0}°)", slope_rad.to_degrees()),
+                RejectReason::TopEdgeSlopeUnsettled { slope_rad, error_rad } => format!("{name} ({:.0}° ± {:.0}°)", slope_rad.to_degrees(), error_rad.to_degrees()),
                 _ => name.to_string(),
             };
             summary.sites.facet_rejections.push((ps.facets[r.facet].plan_facet, detail));
@@ -764,6 +773,24 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     PlanOutput { summary, target, alternatives, images: req.images, refusal, unjudged }
 }
 
+/// How far an edge detector's segment end may lie off the true edge across it, pixels: the
+/// segments' fit. Added (in quadrature) to the calibrated model's residual.
+const SEGMENT_FIT_PX: f64 = 0.5;
+
+/// One-sigma error of a reconstructed point's height near `at`, metres: the pixel error
+/// (model residual and segment fit) over how many pixels a centimetre of height moves the
+/// point in the view that sees height best. Not finite or no parallax: a large error, so
+/// that no rule is settled on it.
+fn point_sigma_m(residual_px: f64, project: &dyn Fn(&Vector3<f64>) -> [[f64; 2]; 2], at: &Vector3<f64>) -> f64 {
+    let error_px = (residual_px.max(0.0).powi(2) + SEGMENT_FIT_PX.powi(2)).sqrt();
+    let (a, b) = (project(at), project(&(at + Vector3::new(0.0, 0.0, 0.01))));
+    let px_per_m = (0..2).map(|k| ((b[k][0] - a[k][0]).powi(2) + (b[k][1] - a[k][1]).powi(2)).sqrt() / 0.01).fold(0.0, f64::max);
+    if !(px_per_m.is_finite() && px_per_m > 1.0) {
+        return 0.01;
+    }
+    error_px / px_per_m
+}
+
 /// What the plan says of the pointed block when it has no grasp.
 #[derive(Debug, Clone, PartialEq)]
 enum PointedBlock {
@@ -797,12 +824,36 @@ fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: O
     };
     let name = |k: usize| component.is_none_or(|c| facets[k].component == c).then(|| format!("facet {}", ps.facets[k].plan_facet));
     let why = why_no_grasp(rejected, name, config);
-    Some(if refusal_grounded(&ps.scene, rejected, name) { PointedBlock::Refused(why) } else { PointedBlock::Unjudged(why) })
+    if refusal_grounded(&ps.scene, rejected, name) {
+        return Some(PointedBlock::Refused(why));
+    }
+    // A wedge whose slope faces the cameras: its sloping top, seen, settles it.
+    let sloping = (0..facets.len()).filter(|&k| name(k).is_some()).filter_map(|k| sloping_top_rad(&ps.scene, k, config)).reduce(f64::min);
+    Some(match sloping {
+        Some(slope_rad) => PointedBlock::Refused(format!(
+            "its top edges slope {:.0}°, more than {:.0}° (its top face, seen)",
+            slope_rad.to_degrees(),
+            config.max_edge_slope_rad.to_degrees()
+        )),
+        None => PointedBlock::Unjudged(why),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_points_height_error_is_the_pixel_error_over_the_pixels_a_height_moves_it() {
+        // 1000 px a metre of height in the left view, 600 in the right: the left one counts.
+        let project = |q: &Vector3<f64>| [[0.0, -1000.0 * q.z], [0.0, -600.0 * q.z]];
+        let sigma_m = point_sigma_m(0.5, &project, &Vector3::zeros());
+        let expected_m = (0.5f64.powi(2) + SEGMENT_FIT_PX.powi(2)).sqrt() / 1000.0;
+        assert!((sigma_m - expected_m).abs() < 1e-9, "{sigma_m} vs {expected_m}");
+        // No parallax (or no finite projection): an error so large that no rule settles.
+        assert!(point_sigma_m(0.5, &|_: &Vector3<f64>| [[1.0, 1.0], [1.0, 1.0]], &Vector3::zeros()) >= 0.01);
+        assert!(point_sigma_m(0.5, &|_: &Vector3<f64>| [[f64::NAN, 0.0], [0.0, 0.0]], &Vector3::zeros()) >= 0.01);
+    }
 
     #[test]
     fn the_scene_model_puts_a_point_where_the_reference_point_would_image_it() {

@@ -13,7 +13,7 @@ fn progress(r: &Rejection) -> u8 {
     match &r.reason {
         RejectReason::FingerCollision { .. } | RejectReason::BodyCollision { .. } if thin_wall => 1,
         RejectReason::FacetNotVertical { .. } => 0,
-        RejectReason::TurnedFromViewer { .. } | RejectReason::NoTopEdge => 1,
+        RejectReason::TurnedFromViewer { .. } | RejectReason::NoTopEdge | RejectReason::TopEdgeSlopeUnsettled { .. } => 1,
         RejectReason::TopEdgeTooSteep { .. } => 2,
         RejectReason::NoOverlap | RejectReason::RearInFront { .. } => 3,
         RejectReason::RearOutOfReach { .. } => 4,
@@ -100,6 +100,12 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
                 continue;
             }
             RejectReason::NoTopEdge => format!("its {name} has no top edge"),
+            RejectReason::TopEdgeSlopeUnsettled { slope_rad, error_rad } => format!(
+                "the top edge of its {name} slopes {:.0}° ± {:.0}°, too near the {:.0}° limit to tell",
+                slope_rad.to_degrees(),
+                error_rad.to_degrees(),
+                config.max_edge_slope_rad.to_degrees()
+            ),
             RejectReason::TurnedFromViewer { angle_rad } => format!("its {name} turns {:.0}° from the cameras", angle_rad.to_degrees()),
             RejectReason::NoOverlap | RejectReason::RearInFront { .. } => format!("its {name} has no parallel edge behind it"),
             RejectReason::RearOutOfReach { drop_m } => {
@@ -120,6 +126,38 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
         return format!("none of its faces is within {:.0}° of vertical", config.max_facet_tilt_rad.to_degrees());
     }
     phrases.join("; ")
+}
+
+/// The slope from horizontal of a seen face that is the block's sloping top, when the rules
+/// settle that it leaves no grasp: the face looks up (it is a top, not a side), it slopes
+/// more than `max_edge_slope_rad` beyond its error (so the faces beside it have top edges as
+/// steep: its own slope), it is more than `max_facet_tilt_rad` from vertical beyond its error
+/// (no grasp on it), and it rises more than `max_rear_drop_m` beyond its error from its low
+/// end to its high end (no pairing across it). A wedge whose slope faces the cameras is seen
+/// this way: the judge refuses it for its steep top edges. `None` when any of these is
+/// within the error: what was seen does not settle it.
+pub fn sloping_top_rad(scene: &GraspScene, facet: usize, config: &GraspConfig) -> Option<f64> {
+    let polygon = &scene.facets.get(facet)?.polygon_m;
+    let mut n = super::polygon_normal(polygon)?;
+    if n.dot(&scene.toward_viewer) < 0.0 {
+        n = -n;
+    }
+    if n[2] <= 0.0 {
+        return None;
+    }
+    let slope_rad = n[2].min(1.0).acos();
+    // The face's extent down its slope (horizontal run) and its rise.
+    let dip = nalgebra::Vector2::new(n[0], n[1]);
+    let dip = if dip.norm() > 1e-9 { dip.normalize() } else { return None };
+    let along: Vec<f64> = polygon.iter().map(|p| p.xy().dot(&dip)).collect();
+    let run_m = along.iter().cloned().fold(f64::MIN, f64::max) - along.iter().cloned().fold(f64::MAX, f64::min);
+    let (z_lo, z_hi) = polygon.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p.z), hi.max(p.z)));
+    let error_rad = (super::ERROR_SIGMAS * std::f64::consts::SQRT_2 * config.point_sigma_m / run_m.max(1e-6)).atan();
+    let rise_error_m = super::ERROR_SIGMAS * std::f64::consts::SQRT_2 * config.point_sigma_m;
+    let steep = slope_rad - error_rad > config.max_edge_slope_rad;
+    let not_vertical = std::f64::consts::FRAC_PI_2 - slope_rad - error_rad > config.max_facet_tilt_rad;
+    let rises = z_hi - z_lo - rise_error_m > config.max_rear_drop_m;
+    (steep && not_vertical && rises).then_some(slope_rad)
 }
 
 #[cfg(test)]

@@ -50,7 +50,7 @@ pub mod scene;
 #[cfg(test)]
 mod tests;
 
-pub use explain::{refusal_grounded, why_no_grasp};
+pub use explain::{refusal_grounded, sloping_top_rad, why_no_grasp};
 pub use scene::{hypothesise_front_faces, scene_from_plan, FacetSource, PlannedScene};
 
 use nalgebra::{Vector2, Vector3};
@@ -197,6 +197,23 @@ pub struct GraspConfig {
     /// facet that the cameras see well. `FRAC_PI_2` (the default) allows any facet that
     /// faces the viewer at all.
     pub max_view_angle_rad: f64,
+    /// One-sigma error of a reconstructed point's height, metres: how far a rule's measure
+    /// may be off. 0 (the default) for exact geometry (the simulator's judge); the daemon
+    /// sets it from the calibrated model's residuals. A top edge's slope is refused only when
+    /// it is past the limit by more than [`ERROR_SIGMAS`] of its error, used only when it is
+    /// within the limit by as much, and otherwise left unsettled (neither).
+    pub point_sigma_m: f64,
+}
+
+/// How many sigmas of a measure's error a rule's verdict must clear: about 95 % one-sided.
+pub const ERROR_SIGMAS: f64 = 2.0;
+
+/// The error bound of a top edge's slope from horizontal, radians: the two ends' heights
+/// each off by `point_sigma_m`, over the edge's horizontal run, [`ERROR_SIGMAS`] wide.
+pub fn edge_slope_error_rad(edge: &Segment3, point_sigma_m: f64) -> f64 {
+    let d = edge.b_m - edge.a_m;
+    let run_m = d.xy().norm().max(1e-6);
+    (ERROR_SIGMAS * std::f64::consts::SQRT_2 * point_sigma_m / run_m).atan()
 }
 
 impl Default for GraspConfig {
@@ -211,6 +228,7 @@ impl Default for GraspConfig {
             max_rear_drop_m: 0.025,
             object_tolerance_m: 0.003,
             max_view_angle_rad: std::f64::consts::FRAC_PI_2,
+            point_sigma_m: 0.0,
         }
     }
 }
@@ -242,6 +260,9 @@ pub enum RejectReason {
     NoTopEdge,
     /// A top edge more than `max_edge_slope_rad` from horizontal.
     TopEdgeTooSteep { slope_rad: f64 },
+    /// A top edge whose slope is within its error bound of `max_edge_slope_rad`: neither
+    /// steep enough to refuse nor flat enough to grasp on.
+    TopEdgeSlopeUnsettled { slope_rad: f64, error_rad: f64 },
     /// A parallel edge of the component that does not overlap the top edge.
     NoOverlap,
     /// A parallel edge in front of the facet, not behind it.
@@ -341,6 +362,7 @@ impl GraspConfig {
             ("contact_tolerance_m", self.contact_tolerance_m),
             ("max_rear_drop_m", self.max_rear_drop_m),
             ("object_tolerance_m", self.object_tolerance_m),
+            ("point_sigma_m", self.point_sigma_m),
         ];
         if let Some(o) = g.jaw_opening_m
             && !(o > 0.0 && o.is_finite() && o >= g.max_width_m)
@@ -576,8 +598,13 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
             }
             any_top = true;
             let slope_rad = d[2].abs().min(1.0).asin();
-            if slope_rad > config.max_edge_slope_rad {
+            let error_rad = edge_slope_error_rad(front, config.point_sigma_m);
+            if slope_rad - error_rad > config.max_edge_slope_rad {
                 rejected.push(reject(Some(ei), None, None, RejectReason::TopEdgeTooSteep { slope_rad }));
+                continue;
+            }
+            if slope_rad + error_rad > config.max_edge_slope_rad {
+                rejected.push(reject(Some(ei), None, None, RejectReason::TopEdgeSlopeUnsettled { slope_rad, error_rad }));
                 continue;
             }
             for rear_ref in scene.component_edges(facet.component) {

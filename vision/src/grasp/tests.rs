@@ -431,3 +431,54 @@ fn of_two_faces_as_near_the_point_the_one_facing_the_cameras_is_chosen() {
     assert_eq!(g.site.facet, 1, "the face towards the cameras");
     assert!((g.site.width_m - x1).abs() < 1e-9);
 }
+
+/// A face towards the cameras (+x) 40 mm along y whose top edge rises from 20 mm by
+/// `slope_deg`, on a block 30 mm deep.
+fn sloped_front(slope_deg: f64) -> GraspScene {
+    let rise = 0.04 * slope_deg.to_radians().tan();
+    let front = facet(vec![p(0.03, 0.0, 0.0), p(0.03, 0.04, 0.0), p(0.03, 0.04, 0.02 + rise), p(0.03, 0.0, 0.02)], 0);
+    scene(vec![front], vec![SceneEdge { segment: Segment3::new(p(0.0, 0.0, 0.02), p(0.0, 0.04, 0.02 + rise)), component: 0 }])
+}
+
+#[test]
+fn a_top_edge_slope_within_its_error_of_the_limit_is_neither_grasped_nor_refused() {
+    let sigma = GraspConfig { point_sigma_m: 0.001, ..Default::default() };
+    // 32°: past 30° on exact geometry, within 30° plus its error (~4° over a 40 mm run).
+    let s = sloped_front(32.0);
+    let exact = plan_grasps(&s, None, &GraspConfig::default()).unwrap();
+    assert!(reasons_for(&exact, 0).iter().any(|r| matches!(r, RejectReason::TopEdgeTooSteep { .. })));
+    let measured = plan_grasps(&s, None, &sigma).unwrap();
+    assert!(measured.chosen.is_none(), "never attempt on a slope that passes only within its error");
+    assert!(reasons_for(&measured, 0).iter().any(|r| matches!(r, RejectReason::TopEdgeSlopeUnsettled { .. })), "{:?}", measured.rejected);
+    assert!(!refusal_grounded(&s, &measured.rejected, |_| Some("face".into())), "unsettled is not a refusal");
+    // 28°: within 30° on exact geometry (grasped), but not beyond its error: not grasped.
+    let s = sloped_front(28.0);
+    assert!(plan_grasps(&s, None, &GraspConfig::default()).unwrap().chosen.is_some());
+    assert!(plan_grasps(&s, None, &sigma).unwrap().chosen.is_none());
+    // 40°: past 30° beyond its error: steep, a grounded refusal.
+    let s = sloped_front(40.0);
+    let steep = plan_grasps(&s, None, &sigma).unwrap();
+    assert!(reasons_for(&steep, 0).iter().any(|r| matches!(r, RejectReason::TopEdgeTooSteep { .. })));
+    assert!(refusal_grounded(&s, &steep.rejected, |_| Some("face".into())));
+}
+
+/// A wedge's slope facing the cameras (+x): from z = `rise` at x = 0 down to 0 at x = `run`.
+fn wedge_slope(run_m: f64, rise_m: f64) -> GraspScene {
+    scene(vec![facet(vec![p(run_m, 0.0, 0.0), p(run_m, 0.04, 0.0), p(0.0, 0.04, rise_m), p(0.0, 0.0, rise_m)], 0)], vec![])
+}
+
+#[test]
+fn a_seen_sloping_top_refuses_only_when_every_rule_fails_beyond_the_error() {
+    let sigma = GraspConfig { point_sigma_m: 0.001, ..Default::default() };
+    // 45 mm over 30 mm: 56° from horizontal, 34° from vertical, rising 45 mm.
+    let slope = sloping_top_rad(&wedge_slope(0.03, 0.045), 0, &sigma).expect("a refusal");
+    assert!((slope.to_degrees() - 56.3).abs() < 0.5, "{}", slope.to_degrees());
+    // Rising 27 mm: past the fingers' 25 mm only within the error: not settled.
+    assert_eq!(sloping_top_rad(&wedge_slope(0.02, 0.027), 0, &sigma), None);
+    // 25° from horizontal: its top edges are within 30°: no refusal.
+    assert_eq!(sloping_top_rad(&wedge_slope(0.07, 0.07 * 25f64.to_radians().tan()), 0, &sigma), None);
+    // 75° from horizontal (15° from vertical): the face itself may be graspable.
+    assert_eq!(sloping_top_rad(&wedge_slope(0.01, 0.01 * 75f64.to_radians().tan()), 0, &sigma), None);
+    // A flat top is no sloping top.
+    assert_eq!(sloping_top_rad(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![]), 1, &sigma), None);
+}
