@@ -53,10 +53,9 @@ pub struct PlaneConfig {
     pub seed_radius_px: f64,
     /// Fewest member segments of an accepted plane.
     pub min_members: usize,
-    /// Least newly explained segment length of an accepted plane, pixels: `min_members`
-    /// segments of the segment stage's shortest length (3 x 5 px), so that a face whose three
-    /// visible sides are each a shortest segment (a ~10 px block face) can be accepted; the
-    /// line tolerance and the members' junctions, not their length, tell a real plane.
+    /// Least newly explained segment length of an accepted plane, pixels. (15 px, three of the
+    /// shortest segments, finds twice the randomised cells' small faces but let a hypothesised
+    /// zero-width facet into clutter3 seed 14's plan: BENCHMARKS, s7-random, reverted.)
     pub min_support_px: f64,
     /// Most seeds tried (best first).
     pub max_seeds: usize,
@@ -76,7 +75,7 @@ pub struct PlaneConfig {
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { line_tol_px: 0.9, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 15.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0, min_anchor_spread_px: 3.0 }
+        Self { line_tol_px: 0.9, epipolar_weight: 0.1, seed_radius_px: 120.0, min_members: 3, min_support_px: 40.0, max_seeds: 3000, weak_angle_deg: 20.0, max_anisotropy: 4.0, min_anchor_spread_px: 3.0 }
     }
 }
 
