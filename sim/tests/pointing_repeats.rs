@@ -11,51 +11,10 @@ use std::path::Path;
 
 use handeye_sim::render::Renderer;
 use handeye_sim::{Scenario, Simulator};
-use handeye_vision::image::ImageView;
-use handeye_vision::pointing::{
-    GestureConfig, GestureState, PlaneHomography, Pointing, PointingTracker, SilhouetteFinder,
-};
+use handeye_vision::pointing::{GestureConfig, GestureState, PointingTracker, SilhouetteFinder};
 
-const SCENARIO: &str = include_str!("../../scenarios/point_clutter3.toml");
-const POINT_PARK_M: [f64; 3] = [0.18, 0.0, 0.14];
-
-fn views(g: &[u8], w: usize, h: usize) -> [ImageView<'_>; 2] {
-    [
-        ImageView::new(&g[..w * h], w, h, w).unwrap(),
-        ImageView::new(&g[w * h..], w, h, w).unwrap(),
-    ]
-}
-
-fn plane_maps(sim: &Simulator) -> Pointing {
-    let z = sim
-        .scenario
-        .cage
-        .points_m
-        .iter()
-        .map(|p| p[2])
-        .fold(f64::INFINITY, f64::min);
-    let lower: Vec<[f64; 3]> = sim
-        .scenario
-        .cage
-        .points_m
-        .iter()
-        .copied()
-        .filter(|p| p[2] < z + 1e-9)
-        .collect();
-    let plane: Vec<[f64; 2]> = lower.iter().map(|p| [p[0], p[1]]).collect();
-    let fit = |v: usize| {
-        let px: Vec<[f64; 2]> = lower
-            .iter()
-            .map(|p| {
-                sim.events.cameras[v]
-                    .project(glam::DVec3::from_array(*p))
-                    .unwrap()
-            })
-            .collect();
-        PlaneHomography::fit(&plane, &px).unwrap()
-    };
-    Pointing::new(fit(0), fit(1))
-}
+mod pointing_support;
+use pointing_support::{ensure_runtime_dir, plane_maps, views, POINT_PARK_M, SCENARIO};
 
 #[test]
 #[ignore = "diagnosis: renders three gestures per seed"]
@@ -69,12 +28,7 @@ fn every_gesture_of_the_seeds() {
                 .expect("HANDEYE_POINTING_SEEDS: comma-separated seeds")
         })
         .collect();
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        let dir = std::env::temp_dir().join(format!("handeye-xdg-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        // SAFETY: set before any thread of this test binary's renderer exists.
-        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
-    }
+    ensure_runtime_dir();
     let dir = std::env::var("HANDEYE_POINTING_DEBUG").unwrap_or("/tmp/handeye-pointing".into());
     let dir = Path::new(&dir);
     std::fs::create_dir_all(dir).unwrap();

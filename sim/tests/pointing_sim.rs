@@ -27,13 +27,12 @@ use std::time::Instant;
 
 use handeye_sim::render::Renderer;
 use handeye_sim::{Scenario, Simulator};
-use handeye_vision::image::ImageView;
-use handeye_vision::pointing::{GestureConfig, GestureState, PlaneHomography, Pointing, PointingTracker};
+use handeye_vision::pointing::{GestureConfig, GestureState, PointingTracker};
 
-const SCENARIO: &str = include_str!("../../scenarios/point_clutter3.toml");
+mod pointing_support;
+use pointing_support::{ensure_runtime_dir, plane_maps, views, POINT_PARK_M, SCENARIO};
+
 const GESTURES: u64 = 30;
-/// The daemon's default `[point] park_m` (`handeye_daemon::config::PointSettings`).
-const POINT_PARK_M: [f64; 3] = [0.18, 0.0, 0.14];
 
 struct Outcome {
     seed: u64,
@@ -42,31 +41,9 @@ struct Outcome {
     picks_target: Option<bool>,
 }
 
-/// The tracker's plane maps from the lower cage points (see the module doc).
-/// The two views of a stereo buffer (left rows, then right rows).
-fn views(g: &[u8], w: usize, h: usize) -> [ImageView<'_>; 2] {
-    [ImageView::new(&g[..w * h], w, h, w).unwrap(), ImageView::new(&g[w * h..], w, h, w).unwrap()]
-}
-
-fn plane_maps(sim: &Simulator) -> Pointing {
-    let z = sim.scenario.cage.points_m.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min);
-    let lower: Vec<[f64; 3]> = sim.scenario.cage.points_m.iter().copied().filter(|p| p[2] < z + 1e-9).collect();
-    let plane: Vec<[f64; 2]> = lower.iter().map(|p| [p[0], p[1]]).collect();
-    let fit = |v: usize| {
-        let px: Vec<[f64; 2]> = lower.iter().map(|p| sim.events.cameras[v].project(glam::DVec3::from_array(*p)).expect("cage in view")).collect();
-        PlaneHomography::fit(&plane, &px).expect("four lower cage points in general position")
-    };
-    Pointing::new(fit(0), fit(1))
-}
-
 #[test]
 fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        let dir = std::env::temp_dir().join(format!("handeye-xdg-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        // SAFETY: set before any thread of this test binary's renderer exists.
-        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
-    }
+    ensure_runtime_dir();
     let base = Scenario::parse(SCENARIO, Path::new("point_clutter3.toml")).unwrap();
     let mut renderer: Option<Renderer> = None;
     let mut outcomes = Vec::new();
