@@ -6,6 +6,7 @@ mod cpu;
 pub mod grasp;
 pub mod image;
 pub mod locate;
+mod moments;
 pub mod pointing;
 pub mod rng;
 pub mod servo;

@@ -10,6 +10,7 @@
 use thiserror::Error;
 
 use crate::image::ImageView;
+use crate::moments::Moments;
 
 /// Why no gripper was located.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
@@ -101,42 +102,10 @@ pub struct ImageMotion {
     pub dropped: usize,
 }
 
-/// Running moments of a pixel set.
-#[derive(Debug, Clone, Copy, Default)]
-struct Moments {
-    n: f64,
-    sx: f64,
-    sy: f64,
-    sxx: f64,
-    syy: f64,
-    sxy: f64,
-}
-
 impl Moments {
-    fn add(&mut self, x: f64, y: f64) {
-        self.n += 1.0;
-        self.sx += x;
-        self.sy += y;
-        self.sxx += x * x;
-        self.syy += y * y;
-        self.sxy += x * y;
-    }
-
-    fn merge(&mut self, o: &Moments) {
-        self.n += o.n;
-        self.sx += o.sx;
-        self.sy += o.sy;
-        self.sxx += o.sxx;
-        self.syy += o.syy;
-        self.sxy += o.sxy;
-    }
-
     /// Centre, axis angle, and 4σ extents along and across the axis.
     fn shape(&self) -> ([f64; 2], f64, f64, f64) {
-        let (mx, my) = (self.sx / self.n, self.sy / self.n);
-        let cxx = self.sxx / self.n - mx * mx;
-        let cyy = self.syy / self.n - my * my;
-        let cxy = self.sxy / self.n - mx * my;
+        let ([mx, my], cxx, cxy, cyy) = self.central();
         let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
         let mean = 0.5 * (cxx + cyy);
         let half_diff = (0.25 * (cxx - cyy).powi(2) + cxy * cxy).sqrt();

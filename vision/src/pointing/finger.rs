@@ -11,6 +11,8 @@
 //! cut by the border is not thin there. Only the caller's fallback (no axis from the whole
 //! silhouette) runs it.
 
+use crate::moments::Moments;
+
 /// Chamfer steps (3 for a side, 4 for a diagonal: distances in thirds of a pixel).
 const SIDE: u32 = 3;
 const DIAGONAL: u32 = 4;
@@ -44,12 +46,7 @@ pub(super) struct FingerFinder {
 /// A residual component's moments.
 #[derive(Debug, Clone, Copy, Default)]
 struct Component {
-    n: f64,
-    sx: f64,
-    sy: f64,
-    sxx: f64,
-    sxy: f64,
-    syy: f64,
+    m: Moments,
     border: bool,
     /// Cells next to the opened silhouette: count and sums.
     root: (f64, f64, f64),
@@ -59,11 +56,11 @@ impl Component {
     /// Centroid and second central moments `(mx, my, cxx, cxy, cyy)`, px; `None` for fewer
     /// than 3 cells (no meaningful direction).
     fn central_moments(&self) -> Option<(f64, f64, f64, f64, f64)> {
-        if self.n < 3.0 {
+        if self.m.n < 3.0 {
             return None;
         }
-        let (mx, my) = (self.sx / self.n, self.sy / self.n);
-        Some((mx, my, self.sxx / self.n - mx * mx, self.sxy / self.n - mx * my, self.syy / self.n - my * my))
+        let ([mx, my], cxx, cxy, cyy) = self.m.central();
+        Some((mx, my, cxx, cxy, cyy))
     }
 }
 
@@ -169,7 +166,7 @@ impl FingerFinder {
                 && width >= MIN_WIDTH_PX.max(0.8 * f64::from(radius) / f64::from(SIDE))
                 && width <= 2.0 * f64::from(radius) / f64::from(SIDE) + 2.0;
             // The largest: a finger outweighs the slivers a hand's side faces leave.
-            if finger_like && best.is_none_or(|(_, b)| b.n < c.n) {
+            if finger_like && best.is_none_or(|(_, b)| b.m.n < c.m.n) {
                 best = Some((next, c));
             }
         }
@@ -288,12 +285,7 @@ impl FingerFinder {
         while let Some(k) = self.stack.pop() {
             let (i, j) = (k % bw, k / bw);
             let (x, y) = (i as f64, j as f64);
-            c.n += 1.0;
-            c.sx += x;
-            c.sy += y;
-            c.sxx += x * x;
-            c.sxy += x * y;
-            c.syy += y * y;
+            c.m.add(x, y);
             let mut at_root = false;
             for dj in -1isize..=1 {
                 for di in -1isize..=1 {
