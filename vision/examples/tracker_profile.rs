@@ -99,6 +99,9 @@ fn main() {
     if let Some(v) = env("TRACKER_MAX_RIVAL_UPDATES") {
         config.max_rival_updates = v as usize;
     }
+    if let Some(v) = env("TRACKER_MAX_CROSSED_SIDE_UPDATES") {
+        config.max_crossed_side_updates = v as usize;
+    }
     if let Some(v) = env("TRACKER_MIN_SHAPE_SUPPORT_POINTS") {
         config.min_shape_support_points = v as usize;
     }
@@ -464,6 +467,10 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
     let (corners, truth): (&[[f64; 2]; 4], &Truth) = if face == "top" { (&TOP, &TRUTH) } else { (&LEFT, &LEFT_FACE_TRUTH) };
     let mut tracker = ContourTracker::new(config, &place(corners, num(dx), num(dy), num(scale))).unwrap();
     let overlay = parse_overlay();
+    let bands = std::env::var("TRACKER_BANDS").ok().map(|s| {
+        let (a, b) = s.split_once(',').expect("TRACKER_BANDS: FROM,TO");
+        (a.parse::<usize>().expect("TRACKER_BANDS: FROM"), b.parse::<usize>().expect("TRACKER_BANDS: TO"))
+    });
     for (k, frame) in frames.iter().enumerate() {
         let state = tracker.update(&frame.view(), if k == 0 { 0.0 } else { 1.0 / 30.0 });
         let (streak, side, offset, turn) = tracker.rival_streak();
@@ -480,6 +487,21 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
                 corners.join(" ")
             );
         }
+        if let Some((from, to)) = bands
+            && (from..=to).contains(&k)
+            && state.is_tracking()
+        {
+            let (c, streak) = tracker.crossed_side();
+            println!(
+                "{k} bands {} | crossed side {} stretch {} share {:.2} (in {:.0} out {:.0}) streak {streak}",
+                band_line(&frames[k], &tracker),
+                c.side,
+                c.stretch,
+                c.share,
+                c.inside,
+                c.outside
+            );
+        }
         if let Some((dir, from, to)) = &overlay
             && (*from..=*to).contains(&k)
         {
@@ -490,6 +512,48 @@ fn trace_run(frames: &[ImageBuf], config: TrackerConfig, spec: &str) {
             break;
         }
     }
+}
+
+/// `TRACKER_BANDS=FROM,TO` with `TRACKER_TRACE`: per side and third of it, the median grey
+/// level 2-5 px inside / outside the contour and 8-11 px outside (`in/out/far`).
+fn band_line(frame: &ImageBuf, tracker: &ContourTracker) -> String {
+    let corners: Vec<Vector2<f64>> = tracker.corners().collect();
+    let centre = corners.iter().fold(Vector2::zeros(), |a, c| a + c) / corners.len() as f64;
+    let mut out = Vec::new();
+    for i in 0..corners.len() {
+        let (a, b) = (corners[i], corners[(i + 1) % corners.len()]);
+        let t = (b - a).normalize();
+        let mut n = Vector2::new(t.y, -t.x);
+        if n.dot(&((a + b) / 2.0 - centre)) < 0.0 {
+            n = -n;
+        }
+        let mut thirds = Vec::new();
+        for third in 0..3 {
+            let (mut ins, mut outs, mut fars) = (Vec::new(), Vec::new(), Vec::new());
+            for j in 0..10 {
+                let u = (third as f64 + (j as f64 + 0.5) / 10.0) / 3.0;
+                let u = 0.1 + 0.8 * u;
+                let p = a + (b - a) * u;
+                for d in [2.0, 3.0, 4.0, 5.0] {
+                    let g = |q: Vector2<f64>| {
+                        let (x, y) = (q.x.round(), q.y.round());
+                        (x >= 0.0 && y >= 0.0 && (x as usize) < frame.view().width() && (y as usize) < frame.view().height())
+                            .then(|| frame.get(x as usize, y as usize) as f64)
+                    };
+                    ins.extend(g(p - n * d));
+                    outs.extend(g(p + n * d));
+                    fars.extend(g(p + n * (d + 6.0)));
+                }
+            }
+            let med = |v: &mut Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v.get(v.len() / 2).copied().unwrap_or(-1.0)
+            };
+            thirds.push(format!("{:.0}/{:.0}/{:.0}", med(&mut ins), med(&mut outs), med(&mut fars)));
+        }
+        out.push(format!("s{i} {}", thirds.join(" ")));
+    }
+    out.join(" | ")
 }
 
 /// `TRACKER_OVERLAY=DIR,FROM,TO` with `TRACKER_TRACE`: the frames FROM..=TO as PNG crops

@@ -130,6 +130,12 @@ pub struct TrackerConfig {
     /// wide pass over every point: with `coarse_stride` > 1, or when `short_first_px` skips
     /// the wide pass, the count does not advance.
     pub max_rival_updates: usize,
+    /// Lost (`wrong_lock`, [`LostReason::CrossedSide`](super::LostReason::CrossedSide)) when
+    /// on this many updates in a row the band just inside a stretch of a side looks like what
+    /// that stretch has learnt lies outside it (`tracker::side_bands`; 0: never check). A
+    /// side that turned or slid across the face's outline onto a neighbouring surface keeps
+    /// an edge, and none of the edge-based checks see it.
+    pub max_crossed_side_updates: usize,
     /// The contour's start shape is the face's shape for the whole track (a still object seen
     /// by still cameras: the daemon's target, placed by the plan): a rival then counts only
     /// where that shape, placed by the similarity nearest the contour's placement, pulls the
@@ -211,6 +217,7 @@ impl Default for TrackerConfig {
             rival_margin_points: 3,
             min_rival_offset_px: 5.0,
             max_rival_updates: 10,
+            max_crossed_side_updates: 0,
             shape_is_fixed: false,
             min_shape_support_points: 0,
             min_direction_support: 0.35,
@@ -276,6 +283,12 @@ impl TrackerConfig {
             "0..=40 px",
         )?;
         check(self.max_rival_updates <= 100_000, "max_rival_updates", self.max_rival_updates as f64, "0..=100000")?;
+        check(
+            self.max_crossed_side_updates <= 100_000,
+            "max_crossed_side_updates",
+            self.max_crossed_side_updates as f64,
+            "0..=100000",
+        )?;
         check(
             self.min_shape_support_points <= 4096,
             "min_shape_support_points",

@@ -110,6 +110,10 @@ pub struct ContourTracker {
     /// Bit `j` set: side `j` is not searched (its edge is not where this view can see it,
     /// e.g. a crease between two faces of one shade); see [`Self::set_side_measured`].
     unmeasured_sides: u64,
+    /// Appearance across each stretch of each side (`TrackerConfig::max_crossed_side_updates`).
+    bands: super::side_bands::SideBands,
+    /// Scratch: the fitted contour's corners in the image, for [`Self::bands`].
+    corner_px: Vec<Vector2<f64>>,
 }
 
 /// What one search and fit found.
@@ -195,6 +199,8 @@ impl ContourTracker {
             rival: super::wrong_lock::Rival::default(),
             rival_updates: 0,
             unmeasured_sides: 0,
+            bands: super::side_bands::SideBands::new(sides),
+            corner_px: Vec::with_capacity(sides.max(8)),
         };
         tracker.restart(frame);
         tracker
@@ -213,6 +219,11 @@ impl ContourTracker {
         self.updates = 0;
         self.rival = super::wrong_lock::Rival::default();
         self.rival_updates = 0;
+        if self.bands.sides() == self.template.sides() {
+            self.bands.reset();
+        } else {
+            self.bands = super::side_bands::SideBands::new(self.template.sides());
+        }
         for v in [&mut self.pos_x, &mut self.pos_y, &mut self.rel_x, &mut self.rel_y, &mut self.nrm_x, &mut self.nrm_y] {
             v.clear();
             v.resize(n, 0.0);
@@ -311,6 +322,11 @@ impl ContourTracker {
         }
         // Per-point choices and residuals of the last pass, for the checks and the learning.
         self.fit.finish();
+        if self.config.max_crossed_side_updates > 0 {
+            self.corner_px.clear();
+            self.corner_px.extend(self.template.corners().iter().map(|c| current.image_from_template(*c)));
+            self.bands.measure(image, &self.corner_px, self.config.min_contrast as f32);
+        }
         let verdict = self.judge(&current);
         self.state = match verdict {
             Some(reason) => TrackState::Lost(reason),
@@ -320,6 +336,9 @@ impl ContourTracker {
                 }
                 self.placement = current;
                 self.learn();
+                if self.config.max_crossed_side_updates > 0 {
+                    self.bands.learn();
+                }
                 let f = self.confidence.inlier_fraction;
                 self.recent_inliers = if self.updates == 0 { f } else { self.recent_inliers + 0.2 * (f - self.recent_inliers) };
                 TrackState::Tracking
@@ -724,6 +743,17 @@ impl ContourTracker {
                 updates: self.rival_updates,
             });
         }
+        if self.config.max_crossed_side_updates > 0 && self.bands.streak >= self.config.max_crossed_side_updates {
+            let w = self.bands.worst;
+            return Some(LostReason::CrossedSide {
+                side: w.side,
+                stretch: w.stretch,
+                share: w.share,
+                inside: w.inside,
+                outside: w.outside,
+                updates: self.bands.streak,
+            });
+        }
         let det = frame.det();
         if det.signum() != self.initial_det.signum() || det == 0.0 {
             return Some(LostReason::FlippedBasis);
@@ -813,6 +843,12 @@ impl ContourTracker {
                 *r += rate * (c - *r);
             }
         }
+    }
+
+    /// The most crossed side stretch of the last update and the updates in a row with one
+    /// (`TrackerConfig::max_crossed_side_updates`; share 0 when off or none measurable).
+    pub fn crossed_side(&self) -> (super::side_bands::Crossing, usize) {
+        (self.bands.worst, self.bands.streak)
     }
 
     /// Current state.

@@ -21,7 +21,9 @@
 //!    frame degeneracy, leaving the image, and a wrong lock (`wrong_lock`: after each wide
 //!    pass, a side whose own points see another straight edge, parallel or turned, 5 px or
 //!    more away at an end more often than the edge the fit put it on, on 10 more updates than
-//!    not). Failing any is the *lost* state with
+//!    not), and a side crossed onto a neighbouring surface (`side_bands`: the band just inside
+//!    a stretch of a side looks like what it learnt lies outside it, on
+//!    `max_crossed_side_updates` updates in a row). Failing any is the *lost* state with
 //!    its [`LostReason`]; the servo must stop on it. Otherwise the points' polarity, contrast
 //!    and inside grey level are learnt.
 //!
@@ -69,6 +71,7 @@ mod filter;
 mod fit;
 mod frame;
 pub mod search;
+mod side_bands;
 mod simd;
 mod state;
 mod stereo;
@@ -81,5 +84,6 @@ pub use contour_tracker::{ContourTracker, SearchLine, TrackerError};
 pub use fit::{DeformationModel, RobustLoss};
 pub use frame::{TemplateFrame, Placement};
 pub use search::{Candidate, Polarity};
+pub use side_bands::Crossing;
 pub use state::{Confidence, LostReason, TrackState};
 pub use stereo::{Role, StereoStates, StereoTrackerSet, View};

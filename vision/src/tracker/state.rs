@@ -36,6 +36,11 @@ pub enum LostReason {
     /// the side's points: the side slid
     /// onto a texture or neighbouring edge and the face's own edge is beside it.
     WrongLock { side: usize, offset_px: f64, turn_px: f64, support: usize, rival: usize, updates: usize },
+    /// The band just inside a stretch of a side looks like what that stretch had learnt lies
+    /// outside it, on `updates` updates in a row (`share` of its samples nearer the learnt
+    /// outside grey level than the inside one): the side crossed onto a neighbouring surface
+    /// while keeping an edge (`tracker::side_bands`). Reported as a wrong lock.
+    CrossedSide { side: usize, stretch: usize, share: f64, inside: f64, outside: f64, updates: usize },
 }
 
 impl LostReason {
@@ -51,7 +56,7 @@ impl LostReason {
             LostReason::DegenerateBasis { .. } => "degenerate_basis",
             LostReason::FlippedBasis => "flipped_basis",
             LostReason::NotFinite => "not_finite",
-            LostReason::WrongLock { .. } => "wrong_lock",
+            LostReason::WrongLock { .. } | LostReason::CrossedSide { .. } => "wrong_lock",
         }
     }
 }
@@ -94,6 +99,12 @@ impl fmt::Display for LostReason {
                 }
                 write!(f, " was found by {rival}, on {updates} more updates than not")
             }
+            LostReason::CrossedSide { side, stretch, share, inside, outside, updates } => write!(
+                f,
+                "wrong lock: inside side {side} (stretch {stretch}) {:.0} % of the grey levels are nearer the {outside:.0} \
+                 learnt outside it than the {inside:.0} learnt inside, on {updates} updates in a row",
+                share * 100.0
+            ),
         }
     }
 }
