@@ -170,8 +170,8 @@ fn the_top_faces_frame_150_slides_are_held_when_the_wide_pass_may_keep_the_predi
     }
 }
 
-/// The same three slides with the side-band check (`max_crossed_side_updates`, issue 18 item
-/// 5): the turned side 2 has the right face, the grey level it had learnt lies outside it, on
+/// The same three slides with the side-band check (`max_crossed_side_updates`, on by default;
+/// issue 18 item 5): the turned side 2 has the right face, the grey level it had learnt lies outside it, on
 /// its inside from frame 149, and the contour is reported lost (`wrong_lock`) by frame 150,
 /// never tracking >= 6 px off an annotation. Without the check all three report `tracking`
 /// 12.2-12.7 px off on frame 150.
