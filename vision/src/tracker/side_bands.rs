@@ -112,10 +112,13 @@ impl SideBands {
         // Outward normals: the polygon's orientation from its signed area.
         let area: f64 = (0..n).map(|i| corners[i].perp(&corners[(i + 1) % n])).sum();
         let orientation = if area >= 0.0 { 1.0 } else { -1.0 };
-        let (w, h) = (image.width() as f64, image.height() as f64);
-        let grey = |q: Vector2<f64>| {
-            let (x, y) = (q.x.round(), q.y.round());
-            (x >= 0.0 && y >= 0.0 && x < w && y < h).then(|| f32::from(image.get(x as usize, y as usize)))
+        let (w, h) = (image.width() as f32, image.height() as f32);
+        let (data, stride) = (image.data(), image.stride());
+        // Nearest pixel; `None` outside the image. Truncation is the floor of the
+        // non-negative `x + 0.5` (`floor` itself is a library call without SSE4.1).
+        let grey = |x: f32, y: f32| {
+            let (x, y) = (x + 0.5, y + 0.5);
+            (x >= 0.0 && y >= 0.0 && x < w && y < h).then(|| f32::from(data[y as usize * stride + x as usize]))
         };
         let mut worst = Crossing::default();
         let mut any = false;
@@ -129,20 +132,28 @@ impl SideBands {
             // With the polygon counter-clockwise in image axes (y down: area > 0), the outward
             // normal of a -> b is (t.y, -t.x).
             let normal = Vector2::new(along.y, -along.x) * (orientation / length);
+            let (nx, ny) = (normal.x as f32, normal.y as f32);
             for k in 0..STRETCHES {
                 let s = &mut self.stretches[side * STRETCHES + k];
-                let (mut inside, mut outside) = ([0f32; SAMPLES], [0f32; SAMPLES]);
-                let (mut n_in, mut n_out) = (0usize, 0usize);
+                let (learnt_in, learnt_out) = (s.inside, s.outside);
+                // Sums over this update's samples: inside, outside, the inside's distance from
+                // the learnt inside level, and the inside samples nearer the learnt outside.
+                let (mut sum_in, mut sum_out, mut sum_spread) = (0f32, 0f32, 0f32);
+                let (mut n_in, mut n_out, mut nearer_outside) = (0usize, 0usize, 0usize);
                 for j in 0..POSITIONS {
                     let u = 0.1 + 0.8 * (k as f64 + (j as f64 + 0.5) / POSITIONS as f64) / STRETCHES as f64;
                     let p = a + along * u;
+                    let (px, py) = (p.x as f32, p.y as f32);
                     for d in DEPTHS_PX {
-                        if let Some(g) = grey(p - normal * d) {
-                            inside[n_in] = g;
+                        let d = d as f32;
+                        if let Some(g) = grey(px - nx * d, py - ny * d) {
+                            sum_in += g;
+                            sum_spread += (g - learnt_in).abs();
+                            nearer_outside += usize::from((g - learnt_out).abs() < (g - learnt_in).abs());
                             n_in += 1;
                         }
-                        if let Some(g) = grey(p + normal * d) {
-                            outside[n_out] = g;
+                        if let Some(g) = grey(px + nx * d, py + ny * d) {
+                            sum_out += g;
                             n_out += 1;
                         }
                     }
@@ -152,23 +163,21 @@ impl SideBands {
                 if !s.valid {
                     continue;
                 }
-                let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
-                s.now_inside = mean(&inside[..n_in]);
-                s.now_outside = mean(&outside[..n_out]);
+                s.now_inside = sum_in / n_in as f32;
+                s.now_outside = sum_out / n_out as f32;
                 if s.learnt == 0 {
                     continue;
                 }
-                s.now_spread = inside[..n_in].iter().map(|g| (g - s.inside).abs()).sum::<f32>() / n_in as f32;
-                let gap = (s.outside - s.inside).abs();
+                s.now_spread = sum_spread / n_in as f32;
+                let gap = (learnt_out - learnt_in).abs();
                 if s.learnt < MIN_LEARNT_UPDATES || gap < min_gap || gap < MIN_GAP_SPREADS * s.spread {
                     continue;
                 }
-                let nearer_outside = inside[..n_in].iter().filter(|g| (**g - s.outside).abs() < (**g - s.inside).abs()).count();
                 let share = nearer_outside as f64 / n_in as f64;
                 s.crossed = 2 * nearer_outside >= n_in;
                 any |= s.crossed;
                 if share > worst.share {
-                    worst = Crossing { side, stretch: k, share, inside: f64::from(s.inside), outside: f64::from(s.outside) };
+                    worst = Crossing { side, stretch: k, share, inside: f64::from(learnt_in), outside: f64::from(learnt_out) };
                 }
             }
         }
