@@ -20,7 +20,8 @@
 //! verdicts) lists the runs that build tracked to the end and this one reports lost, and
 //! `TRACKER_TRACE=top|left,dx,dy,scale` prints one run frame by frame (with
 //! `TRACKER_OVERLAY=DIR,FROM,TO`, PNG crops of frames FROM..=TO with the contour and its
-//! edges). `TRACKER_<FIELD>` overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
+//! edges; with `TRACKER_BANDS=FROM,TO`, per side the grey levels just inside and outside it and
+//! the side-band check's most crossed stretch). `TRACKER_<FIELD>` overrides a setting (`TRACKER_MAX_RIVAL_UPDATES=0`: no wrong-lock check).
 //!
 //! ```text
 //! TRACKER_GRID=wide TRACKER_VERDICTS=/tmp/after.txt TRACKER_BASELINE=/tmp/before.txt \
