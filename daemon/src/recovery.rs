@@ -27,7 +27,7 @@
 
 use handeye_vision::affine::EpipolarConstraint;
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TemplateFrame, View};
+use handeye_vision::tracker::{ContourTracker, LostReason, Role, StereoTrackerSet, TemplateFrame, View};
 use nalgebra::Vector2;
 
 use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
@@ -57,6 +57,37 @@ const MAX_PREDICTED_SHIFT_PX: f64 = 120.0;
 /// the robot's base 0.7 px from where it was refused). The tracker's own search reaches
 /// ±12 px, so a candidate this close would converge onto the refused lock anyway.
 pub const REFUSED_LOCK_TOL_PX: f64 = 4.0;
+
+/// Why a contour a phase needs counts as lost (`hard_loop/hold.rs`): typed, so that the
+/// recovery tells a wrong lock from other losses by what the tracker measured, not by how it
+/// words it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LossCause {
+    /// The tracker stopped, for this reason.
+    Tracker(LostReason),
+    /// The tracker did not run this cycle.
+    DidNotRun,
+    /// Tracking, but below the confidence the safety checks want.
+    Unsure { score: f64, min: f64 },
+}
+
+impl LossCause {
+    /// The tracker was declared locked on something that is not its contour: the shape it
+    /// holds now is that wrong lock.
+    pub fn is_wrong_lock(&self) -> bool {
+        matches!(self, LossCause::Tracker(LostReason::WrongLock { .. }))
+    }
+}
+
+impl std::fmt::Display for LossCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LossCause::Tracker(why) => write!(f, "{why}"),
+            LossCause::DidNotRun => write!(f, "did not run"),
+            LossCause::Unsure { score, min } => write!(f, "confidence {score:.2} < {min}"),
+        }
+    }
+}
 
 /// The last template frame a contour tracked confidently, when (camera ns), and its image
 /// velocity then (px/s).
@@ -197,9 +228,6 @@ fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTra
     true
 }
 
-/// How the tracker words a loss to a wrong lock (`handeye_vision::tracker`'s lost reason).
-const WRONG_LOCK: &str = "wrong lock";
-
 /// Whether `cand` sits on the `refused` corners (the lock its tracker was declared wrong on):
 /// every corner within [`REFUSED_LOCK_TOL_PX`].
 fn same_lock(cand: &ContourTracker, refused: &[Vector2<f64>]) -> bool {
@@ -220,7 +248,7 @@ impl Recovery {
     /// hold again, as the safety checks want it. Gives up after `patience_s` of camera time.
     pub fn start(
         trackers: &mut StereoTrackerSet,
-        lost: &[(Role, View, String)],
+        lost: &[(Role, View, LossCause)],
         last_good: &[Option<LastGood>; 4],
         now_ns: u64,
         patience_s: f64,
@@ -228,24 +256,24 @@ impl Recovery {
     ) -> Self {
         let mut r = Self { start_ns: now_ns, excused_ns: 0, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0, by_jaws: false };
         for (role, view, why) in lost {
-            r.add(trackers, *role, *view, why, last_good, now_ns);
+            r.add(trackers, *role, *view, *why, last_good, now_ns);
         }
         r
     }
 
     /// Adds a contour lost while holding (no-op if it is searched for already, or has no
     /// tracker). Its tracker rests (inactive) while it is searched for.
-    pub fn add(&mut self, trackers: &mut StereoTrackerSet, role: Role, view: View, why: &str, last_good: &[Option<LastGood>; 4], now_ns: u64) {
+    pub fn add(&mut self, trackers: &mut StereoTrackerSet, role: Role, view: View, why: LossCause, last_good: &[Option<LastGood>; 4], now_ns: u64) {
         if self.slots.iter().any(|s| s.role == role && s.view == view) {
             return;
         }
         let Some(tracker) = trackers.get(role, view) else { return };
-        tracing::debug!(who = %name(role, view), why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
+        tracing::debug!(who = %name(role, view), %why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
         let (base, lost_ns, velocity_px_s) = match last_good[slot_index(role, view)] {
             Some(g) => (g.frame, g.time_ns, Vector2::from(g.velocity_px_s)),
             None => (tracker.frame(), now_ns, Vector2::zeros()),
         };
-        let refused = why.starts_with(WRONG_LOCK).then(|| tracker.corners().collect());
+        let refused = why.is_wrong_lock().then(|| tracker.corners().collect());
         trackers.set_active(role, view, false);
         let search = ShiftSearch::new(settings(0), base, Vector2::zeros());
         self.slots.push(Slot { role, view, why: why.to_string(), base, lost_ns, velocity_px_s, search, passes: 0, found: None, refused });

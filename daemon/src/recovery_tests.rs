@@ -3,9 +3,18 @@
 
 use super::*;
 use handeye_vision::image::ImageBuf;
-use handeye_vision::tracker::{ContourTracker, TrackerConfig};
+use handeye_vision::tracker::{ContourTracker, LostReason, TrackerConfig};
 
 const FRAME_NS: u64 = 33_333_333;
+/// A contour that jumped off (its support fell at once).
+const JUMPED: LossCause = LossCause::Tracker(LostReason::SuddenDrop { inlier_fraction: 0.2, recent: 0.9 });
+/// A contour covered bit by bit.
+const FELL: LossCause = LossCause::Tracker(LostReason::TooFewInliers { inlier_fraction: 0.3 });
+
+/// A tracker declared wrongly locked on `side`.
+fn wrong_lock(side: usize) -> LossCause {
+    LossCause::Tracker(LostReason::WrongLock { side, offset_px: 1.0, turn_px: -15.0, support: 4, rival: 18, updates: 10 })
+}
 
 /// A bright plate in a dark border (the gripper) shifted by `(dx, dy)` and a grey square
 /// (the target) shifted by `(dx + tx, dy)`; `hide_target` paints the target over.
@@ -68,7 +77,7 @@ fn a_knocked_view_is_found_again_at_its_shift() {
     let knocked = scene(-63, 7, 0, false);
     let states = set.update(&knocked.view(), &still.view(), 0.03);
     assert!(!states.get(Role::Gripper, View::Left).unwrap().is_tracking(), "a 63 px jump loses the tracker");
-    let lost = [(Role::Gripper, View::Left, "jumped".to_string()), (Role::Target, View::Left, "jumped".to_string())];
+    let lost = [(Role::Gripper, View::Left, JUMPED), (Role::Target, View::Left, JUMPED)];
     let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
     assert!(rec.is_searching(Role::Target, View::Left) && !set.is_active(Role::Gripper, View::Left), "lost trackers rest while searched for");
     let step = run(&mut rec, &mut set, &knocked, &still, 60);
@@ -90,7 +99,7 @@ fn a_hidden_target_is_held_for_and_found_where_it_comes_back() {
     // Something covers the target in the right view for 40 frames; it then reappears
     // 25 px to the right (it was nudged while hidden).
     let hidden = scene(0, 0, 0, true);
-    let lost = [(Role::Target, View::Right, "support fell".to_string())];
+    let lost = [(Role::Target, View::Right, FELL)];
     let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
     let step = run(&mut rec, &mut set, &still, &hidden, 40);
     let t = set.get(Role::Target, View::Right).unwrap();
@@ -111,21 +120,21 @@ fn nothing_to_find_fails_after_the_patience_naming_what_was_lost() {
     let still = scene(0, 0, 0, false);
     let (mut set, good) = trackers(&still);
     let blank = ImageBuf::filled(400, 300, 90);
-    let lost = [(Role::Gripper, View::Left, "edges gone".to_string())];
+    let lost = [(Role::Gripper, View::Left, LossCause::Tracker(LostReason::TooFewEdges { edge_fraction: 0.1 }))];
     let mut rec = Recovery::start(&mut set, &lost, &good, 0, 1.0, [0.6, 0.45]);
     // One second of camera time is 30 frames: still holding at 29, failed by 32.
     assert_eq!(run(&mut rec, &mut set, &blank, &still, 29), RecoveryStep::Searching);
     let step = run(&mut rec, &mut set, &blank, &still, 32);
     let RecoveryStep::Failed(why) = step else { panic!("{step:?}") };
     let text = why.to_string();
-    assert!(text.contains("gripper tracker (left view) lost: edges gone") && text.contains("not found again within 1.0 s"), "{text}");
+    assert!(text.contains("gripper tracker (left view) lost: too few edges (10 % of points found one)") && text.contains("not found again within 1.0 s"), "{text}");
 }
 
 #[test]
 fn a_plate_located_by_the_jaws_is_confirmed_and_reported_with_its_shift() {
     let still = scene(0, 0, 0, false);
     let (mut set, good) = trackers(&still);
-    let lost = [(Role::Gripper, View::Right, "hidden".to_string())];
+    let lost = [(Role::Gripper, View::Right, FELL)];
     let mut rec = Recovery::start(&mut set, &lost, &good, 0, 10.0, [0.6, 0.45]);
     assert!(rec.plate_missing() && !set.is_active(Role::Gripper, View::Right));
     // The jaws' motion located the plate 20 px to the right: a fresh tracker there.
@@ -147,17 +156,17 @@ fn a_candidate_back_on_the_refused_wrong_lock_is_no_recovery() {
     // base). The same shape is still in the image; the search must not take it back.
     let still = scene(0, 0, 0, false);
     let (mut set, good) = trackers(&still);
-    let why = "wrong lock: side 3 is on an edge 4 of its points found".to_string();
+    let why = wrong_lock(3);
     let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, why)], &good, 0, 10.0, [0.6, 0.45]);
     assert_eq!(run(&mut rec, &mut set, &still, &still, 60), RecoveryStep::Searching, "the refused lock is not re-found");
     assert!(rec.plate_missing() && !set.is_active(Role::Gripper, View::Right), "the arm keeps holding for the plate");
     // Lost for another reason, the same shape is a recovery.
     let (mut set, good) = trackers(&still);
-    let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, "support fell".to_string())], &good, 0, 10.0, [0.6, 0.45]);
+    let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, FELL)], &good, 0, 10.0, [0.6, 0.45]);
     assert!(matches!(run(&mut rec, &mut set, &still, &still, 60), RecoveryStep::Recovered { .. }));
     // Refused at its old place, the plate moved 30 px on is found there.
     let (mut set, good) = trackers(&still);
-    let why = "wrong lock: side 0".to_string();
+    let why = wrong_lock(0);
     let mut rec = Recovery::start(&mut set, &[(Role::Gripper, View::Right, why)], &good, 0, 10.0, [0.6, 0.45]);
     let moved = scene(30, 0, 0, false);
     let step = run(&mut rec, &mut set, &still, &moved, 60);
