@@ -177,6 +177,22 @@ pub struct EpipolarCheck {
     pub constraint: EpipolarConstraint,
     /// Largest residual accepted, px, beyond the plate's own (a moved camera offsets both).
     pub tol_px: f64,
+    /// Largest residual a re-found plate may have with the other view's plate, px: from the
+    /// calibration's own residual ([`plate_tol_px`]).
+    pub plate_tol_px: f64,
+}
+
+/// Standard deviations of the calibration's residual a re-found plate pair may be off the
+/// epipolar constraint. Seed 22 of point_clutter3: the pair before the loss 0.2 px off, the
+/// look-alike on the robot's base 69 px off, against a fit residual of 5.35 px RMS.
+pub const PLATE_EPIPOLAR_SIGMAS: f64 = 3.0;
+/// Least tolerance of the plate check, px (a near-perfect fit still sees tracker noise).
+pub const MIN_PLATE_EPIPOLAR_TOL_PX: f64 = 4.0;
+
+/// The plate check's tolerance from the calibration's residuals (the affine fit's over the cage
+/// and the image-only epipolar fit's, RMS px).
+pub fn plate_tol_px(fit_rms_px: f64, epipolar_rms_px: f64) -> f64 {
+    (PLATE_EPIPOLAR_SIGMAS * fit_rms_px.max(epipolar_rms_px)).max(MIN_PLATE_EPIPOLAR_TOL_PX)
 }
 
 fn centroid(t: &ContourTracker) -> Vector2<f64> {
@@ -198,8 +214,12 @@ fn inside(poly: &[Vector2<f64>], p: Vector2<f64>) -> bool {
 
 /// A search candidate for `role` in `view` is not another contour that is being tracked
 /// there (a square lost off a block face locks happily onto part of the plate), and, for
-/// a target the other view still tracks, satisfies the epipolar constraint with it.
-fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTrackerSet, epipolar: Option<&EpipolarCheck>) -> bool {
+/// a target the other view still tracks, satisfies the epipolar constraint with it. A plate
+/// candidate must satisfy it with the other view's tracked plate too (issue 19, seed 22: the
+/// right plate re-found on a look-alike strip of the robot's base passed the area check but
+/// sat 69 px off the constraint): `mate_plate`, the other view's plate origin to check
+/// against ([`Recovery::mate_plate`]; `None`: no check).
+fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTrackerSet, epipolar: Option<&EpipolarCheck>, mate_plate: Option<Vector2<f64>>) -> bool {
     let tracked = |r: Role, v: View| trackers.is_active(r, v).then(|| trackers.get(r, v)).flatten().filter(|t| t.state().is_tracking());
     let other_role = if role == Role::Gripper { Role::Target } else { Role::Gripper };
     if let Some(o) = tracked(other_role, view) {
@@ -222,6 +242,20 @@ fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTra
             _ => 0.0,
         };
         if (residual(l, r) - offset).abs() > e.tol_px {
+            return false;
+        }
+    }
+    if role == Role::Gripper
+        && let Some(e) = epipolar
+        && let Some(mate) = mate_plate
+    {
+        // Frame origins (the template's centre): plate points all lie on the constraint
+        // under the affine model; a point extrapolated from the frame would not.
+        let c = cand.frame().origin;
+        let (l, r) = if view == View::Left { (c, mate) } else { (mate, c) };
+        let residual = e.constraint.residual_px(&[l.x, l.y, r.x, r.y]);
+        if !(residual.abs() <= e.plate_tol_px) {
+            tracing::debug!(who = %name(role, view), residual, tol = e.plate_tol_px, "plate candidate off the other view's plate's epipolar line: refused");
             return false;
         }
     }
@@ -344,6 +378,30 @@ impl Recovery {
         self.slots.iter().map(|s| format!("{} lost: {}", name(s.role, s.view), s.why)).collect::<Vec<_>>().join("; ")
     }
 
+    /// Where the other view's plate is, to check a plate candidate in `view` against: its
+    /// tracker's origin while it tracks; its frame before the loss while it is searched for too
+    /// (the arm holds: both plates were lost together under something, e.g. the operator's
+    /// hand, and the first candidate found must not go unchecked). `None`, no check, when this
+    /// view or the other lost its target as well: the sign of a knocked camera, which shifts
+    /// its whole view off the constraint. A knocked view whose target was not lost (or is not
+    /// tracked) is refused here and found by the jaws' motion instead: when in doubt the arm
+    /// holds.
+    fn mate_plate(&self, trackers: &StereoTrackerSet, view: View) -> Option<Vector2<f64>> {
+        let other = if view == View::Left { View::Right } else { View::Left };
+        if self.slots.iter().any(|s| s.role == Role::Target) && View::ALL.into_iter().any(|v| self.slots.iter().filter(|s| s.view == v).count() == 2) {
+            return None;
+        }
+        match self.slots.iter().find(|s| s.role == Role::Gripper && s.view == other) {
+            Some(s) if s.found.is_none() => Some(s.base.origin),
+            _ => trackers
+                .is_active(Role::Gripper, other)
+                .then(|| trackers.get(Role::Gripper, other))
+                .flatten()
+                .filter(|t| t.state().is_tracking())
+                .map(|t| t.frame().origin),
+        }
+    }
+
     fn min_candidate(&self, role: Role) -> f64 {
         if role == Role::Gripper { MIN_PLATE_SCORE.max(self.min_scores[0]) } else { MIN_TARGET_SCORE.max(self.min_scores[1]) }
     }
@@ -397,10 +455,11 @@ impl Recovery {
                 return RecoveryStep::Failed(RecoveryError::NoTracker { what: self.what() });
             };
             let min = self.min_candidate(role);
+            let mate_plate = if role == Role::Gripper { self.mate_plate(trackers, view) } else { None };
             let slot = &mut self.slots[i];
             let set: &StereoTrackerSet = trackers;
             let refused = slot.refused.as_deref();
-            let accept = |cand: &ContourTracker| plausible(cand, role, view, set, epipolar) && !refused.is_some_and(|r| same_lock(cand, r));
+            let accept = |cand: &ContourTracker| plausible(cand, role, view, set, epipolar, mate_plate) && !refused.is_some_and(|r| same_lock(cand, r));
             match slot.search.step_where(base, image, accept) {
                 SearchStep::Searching => {}
                 SearchStep::Done(Some(best)) if best.score >= min => {
