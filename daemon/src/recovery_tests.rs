@@ -202,7 +202,7 @@ fn a_plate_candidate_off_the_other_views_plate_epipolar_line_is_no_recovery() {
     // Rectified views: image rows are epipolar lines (residual (v - v')/sqrt 2), and the
     // calibration fitted to 2 px RMS.
     let check = EpipolarCheck {
-        constraint: EpipolarConstraint::from_normal(nalgebra::Vector4::new(0.0, 1.0, 0.0, -1.0), 0.0),
+        constraint: handeye_vision::affine::EpipolarConstraint::from_normal(nalgebra::Vector4::new(0.0, 1.0, 0.0, -1.0), 0.0),
         tol_px: 16.0,
         plate_tol_px: plate_tol_px(2.0, 1.0),
     };
