@@ -10,6 +10,7 @@
 //! all against the `handeye/*` services of a domain, whoever publishes them.
 
 pub mod camera_clock;
+pub mod candidate_check;
 pub mod config;
 pub mod fault;
 pub mod gesture_thread;

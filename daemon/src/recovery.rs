@@ -9,7 +9,9 @@
 //! every pass that found nothing (±40, ±80, then ±160 px, repeated). A candidate must pass
 //! the acquisition's verification (the tracker's confidence, its area within ±11 % of the
 //! template's; not back on the corners a tracker lost to a wrong lock was refused on: the
-//! last good frame can itself be that lock); when every lost contour is back, all must track
+//! last good frame can itself be that lock; a plate on the calibration's epipolar constraint
+//! with the other view's plate, tracked or as it was before the loss: a look-alike elsewhere
+//! passes the area check); when every lost contour is back, all must track
 //! confidently for
 //! [`CONFIRM_FRAMES`] frames (the target's outline refined from its edges halfway, as at
 //! acquisition) before the phase resumes from fresh frames. After `safety.loss_patience_s`
@@ -25,11 +27,12 @@
 //! Allocates (tracker clones per candidate, the failure text): it runs only while the arm is
 //! held.
 
-use handeye_vision::affine::EpipolarConstraint;
 use handeye_vision::image::ImageView;
-use handeye_vision::tracker::{ContourTracker, Role, StereoTrackerSet, TemplateFrame, View};
+use handeye_vision::tracker::{ContourTracker, LostReason, Role, StereoTrackerSet, TemplateFrame, View};
 use nalgebra::Vector2;
 
+use crate::candidate_check::{plausible, same_lock};
+pub use crate::candidate_check::{plate_tol_px, EpipolarCheck, MIN_PLATE_EPIPOLAR_TOL_PX, PLATE_EPIPOLAR_SIGMAS, REFUSED_LOCK_TOL_PX};
 use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
 
 /// Widest shift searched, px (a 3° pan at f = 1800 px is ~94 px).
@@ -51,12 +54,36 @@ pub const MIN_TARGET_SCORE: f64 = 0.6;
 pub const CONFIRM_FRAMES: u32 = 12;
 /// Largest predicted shift a search is centred on, px.
 const MAX_PREDICTED_SHIFT_PX: f64 = 120.0;
-/// A candidate whose every corner is within this of the shape a tracker was declared wrongly
-/// locked on, px, is that lock again, not a recovery (issue 18: the search's base, the last
-/// steady shape, can itself be the wrong lock; seed 22 of point_clutter3 re-found a strip of
-/// the robot's base 0.7 px from where it was refused). The tracker's own search reaches
-/// ±12 px, so a candidate this close would converge onto the refused lock anyway.
-pub const REFUSED_LOCK_TOL_PX: f64 = 4.0;
+/// Why a contour a phase needs counts as lost (`hard_loop/hold.rs`): typed, so that the
+/// recovery tells a wrong lock from other losses by what the tracker measured, not by how it
+/// words it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LossCause {
+    /// The tracker stopped, for this reason.
+    Tracker(LostReason),
+    /// The tracker did not run this cycle.
+    DidNotRun,
+    /// Tracking, but below the confidence the safety checks want.
+    Unsure { score: f64, min: f64 },
+}
+
+impl LossCause {
+    /// The tracker was declared locked on something that is not its contour: the shape it
+    /// holds now is that wrong lock.
+    pub fn is_wrong_lock(&self) -> bool {
+        matches!(self, LossCause::Tracker(LostReason::WrongLock { .. }))
+    }
+}
+
+impl std::fmt::Display for LossCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LossCause::Tracker(why) => write!(f, "{why}"),
+            LossCause::DidNotRun => write!(f, "did not run"),
+            LossCause::Unsure { score, min } => write!(f, "confidence {score:.2} < {min}"),
+        }
+    }
+}
 
 /// The last template frame a contour tracked confidently, when (camera ns), and its image
 /// velocity then (px/s).
@@ -139,74 +166,6 @@ fn role_index(role: Role) -> usize {
     usize::from(role == Role::Target)
 }
 
-/// The calibration's epipolar constraint, to verify a re-found target against the other
-/// view (the same check the acquisition makes of a hint).
-#[derive(Debug, Clone, Copy)]
-pub struct EpipolarCheck {
-    pub constraint: EpipolarConstraint,
-    /// Largest residual accepted, px, beyond the plate's own (a moved camera offsets both).
-    pub tol_px: f64,
-}
-
-fn centroid(t: &ContourTracker) -> Vector2<f64> {
-    let n = t.corners().len().max(1) as f64;
-    t.corners().sum::<Vector2<f64>>() / n
-}
-
-/// Whether `p` lies inside the closed polygon `poly` (even-odd rule).
-fn inside(poly: &[Vector2<f64>], p: Vector2<f64>) -> bool {
-    let mut odd = false;
-    for i in 0..poly.len() {
-        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
-        if (a.y > p.y) != (b.y > p.y) && p.x < a.x + (p.y - a.y) * (b.x - a.x) / (b.y - a.y) {
-            odd = !odd;
-        }
-    }
-    odd
-}
-
-/// A search candidate for `role` in `view` is not another contour that is being tracked
-/// there (a square lost off a block face locks happily onto part of the plate), and, for
-/// a target the other view still tracks, satisfies the epipolar constraint with it.
-fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTrackerSet, epipolar: Option<&EpipolarCheck>) -> bool {
-    let tracked = |r: Role, v: View| trackers.is_active(r, v).then(|| trackers.get(r, v)).flatten().filter(|t| t.state().is_tracking());
-    let other_role = if role == Role::Gripper { Role::Target } else { Role::Gripper };
-    if let Some(o) = tracked(other_role, view) {
-        let poly: Vec<Vector2<f64>> = o.corners().collect();
-        let cpoly: Vec<Vector2<f64>> = cand.corners().collect();
-        if inside(&poly, centroid(cand)) || inside(&cpoly, centroid(o)) {
-            return false;
-        }
-    }
-    let other_view = if view == View::Left { View::Right } else { View::Left };
-    if role == Role::Target
-        && let Some(e) = epipolar
-        && let Some(mate) = tracked(Role::Target, other_view)
-    {
-        let (l, r) = if view == View::Left { (centroid(cand), centroid(mate)) } else { (centroid(mate), centroid(cand)) };
-        let residual = |l: Vector2<f64>, r: Vector2<f64>| e.constraint.residual_px(&[l.x, l.y, r.x, r.y]);
-        // The plate's residual in the same pair: what a moved camera adds to every point.
-        let offset = match (tracked(Role::Gripper, View::Left), tracked(Role::Gripper, View::Right)) {
-            (Some(gl), Some(gr)) => residual(centroid(gl), centroid(gr)),
-            _ => 0.0,
-        };
-        if (residual(l, r) - offset).abs() > e.tol_px {
-            return false;
-        }
-    }
-    true
-}
-
-/// How the tracker words a loss to a wrong lock (`handeye_vision::tracker`'s lost reason).
-const WRONG_LOCK: &str = "wrong lock";
-
-/// Whether `cand` sits on the `refused` corners (the lock its tracker was declared wrong on):
-/// every corner within [`REFUSED_LOCK_TOL_PX`].
-fn same_lock(cand: &ContourTracker, refused: &[Vector2<f64>]) -> bool {
-    let corners: Vec<Vector2<f64>> = cand.corners().collect();
-    corners.len() == refused.len() && corners.iter().zip(refused).all(|(c, r)| (c - r).norm() <= REFUSED_LOCK_TOL_PX)
-}
-
 /// Index of a (role, view) slot, in telemetry order: gripper left, gripper right, target
 /// left, target right.
 pub fn slot_index(role: Role, view: View) -> usize {
@@ -220,7 +179,7 @@ impl Recovery {
     /// hold again, as the safety checks want it. Gives up after `patience_s` of camera time.
     pub fn start(
         trackers: &mut StereoTrackerSet,
-        lost: &[(Role, View, String)],
+        lost: &[(Role, View, LossCause)],
         last_good: &[Option<LastGood>; 4],
         now_ns: u64,
         patience_s: f64,
@@ -228,24 +187,24 @@ impl Recovery {
     ) -> Self {
         let mut r = Self { start_ns: now_ns, excused_ns: 0, patience_s, min_scores, slots: Vec::with_capacity(4), confirmed: None, best_score: 0.0, relapses: 0, by_jaws: false };
         for (role, view, why) in lost {
-            r.add(trackers, *role, *view, why, last_good, now_ns);
+            r.add(trackers, *role, *view, *why, last_good, now_ns);
         }
         r
     }
 
     /// Adds a contour lost while holding (no-op if it is searched for already, or has no
     /// tracker). Its tracker rests (inactive) while it is searched for.
-    pub fn add(&mut self, trackers: &mut StereoTrackerSet, role: Role, view: View, why: &str, last_good: &[Option<LastGood>; 4], now_ns: u64) {
+    pub fn add(&mut self, trackers: &mut StereoTrackerSet, role: Role, view: View, why: LossCause, last_good: &[Option<LastGood>; 4], now_ns: u64) {
         if self.slots.iter().any(|s| s.role == role && s.view == view) {
             return;
         }
         let Some(tracker) = trackers.get(role, view) else { return };
-        tracing::debug!(who = %name(role, view), why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
+        tracing::debug!(who = %name(role, view), %why, has_good = last_good[slot_index(role, view)].is_some(), base = ?last_good[slot_index(role, view)].map(|g| g.frame), "joins the search");
         let (base, lost_ns, velocity_px_s) = match last_good[slot_index(role, view)] {
             Some(g) => (g.frame, g.time_ns, Vector2::from(g.velocity_px_s)),
             None => (tracker.frame(), now_ns, Vector2::zeros()),
         };
-        let refused = why.starts_with(WRONG_LOCK).then(|| tracker.corners().collect());
+        let refused = why.is_wrong_lock().then(|| tracker.corners().collect());
         trackers.set_active(role, view, false);
         let search = ShiftSearch::new(settings(0), base, Vector2::zeros());
         self.slots.push(Slot { role, view, why: why.to_string(), base, lost_ns, velocity_px_s, search, passes: 0, found: None, refused });
@@ -316,6 +275,30 @@ impl Recovery {
         self.slots.iter().map(|s| format!("{} lost: {}", name(s.role, s.view), s.why)).collect::<Vec<_>>().join("; ")
     }
 
+    /// Where the other view's plate is, to check a plate candidate in `view` against: its
+    /// tracker's origin while it tracks; its frame before the loss while it is searched for too
+    /// (the arm holds: both plates were lost together under something, e.g. the operator's
+    /// hand, and the first candidate found must not go unchecked). `None`, no check, when this
+    /// view or the other lost its target as well: the sign of a knocked camera, which shifts
+    /// its whole view off the constraint. A knocked view whose target was not lost (or is not
+    /// tracked) is refused here and found by the jaws' motion instead: when in doubt the arm
+    /// holds.
+    fn mate_plate(&self, trackers: &StereoTrackerSet, view: View) -> Option<Vector2<f64>> {
+        let other = if view == View::Left { View::Right } else { View::Left };
+        if self.slots.iter().any(|s| s.role == Role::Target) && View::ALL.into_iter().any(|v| self.slots.iter().filter(|s| s.view == v).count() == 2) {
+            return None;
+        }
+        match self.slots.iter().find(|s| s.role == Role::Gripper && s.view == other) {
+            Some(s) if s.found.is_none() => Some(s.base.origin),
+            _ => trackers
+                .is_active(Role::Gripper, other)
+                .then(|| trackers.get(Role::Gripper, other))
+                .flatten()
+                .filter(|t| t.state().is_tracking())
+                .map(|t| t.frame().origin),
+        }
+    }
+
     fn min_candidate(&self, role: Role) -> f64 {
         if role == Role::Gripper { MIN_PLATE_SCORE.max(self.min_scores[0]) } else { MIN_TARGET_SCORE.max(self.min_scores[1]) }
     }
@@ -369,10 +352,11 @@ impl Recovery {
                 return RecoveryStep::Failed(RecoveryError::NoTracker { what: self.what() });
             };
             let min = self.min_candidate(role);
+            let mate_plate = if role == Role::Gripper { self.mate_plate(trackers, view) } else { None };
             let slot = &mut self.slots[i];
             let set: &StereoTrackerSet = trackers;
             let refused = slot.refused.as_deref();
-            let accept = |cand: &ContourTracker| plausible(cand, role, view, set, epipolar) && !refused.is_some_and(|r| same_lock(cand, r));
+            let accept = |cand: &ContourTracker| plausible(cand, role, view, set, epipolar, mate_plate) && !refused.is_some_and(|r| same_lock(cand, r));
             match slot.search.step_where(base, image, accept) {
                 SearchStep::Searching => {}
                 SearchStep::Done(Some(best)) if best.score >= min => {

@@ -13,7 +13,7 @@ use crate::fault::Fault;
 use crate::outcome::LossRecord;
 use crate::phase::acquire_gripper::AcquireGripper;
 use crate::phase::{Cmd, Cycle, Step};
-use crate::recovery::{slot_index, EpipolarCheck, LastGood, Recovery, RecoveryStep};
+use crate::recovery::{slot_index, EpipolarCheck, LastGood, LossCause, Recovery, RecoveryStep};
 use crate::safety::{check_trackers, needs_trackers};
 
 /// Camera time a target lost in the servo (and nothing else) is searched for before the
@@ -35,7 +35,7 @@ const MAX_VIEW_SKEW_NS: u64 = 100_000_000;
 
 /// The trackers `phase` needs that are lost or below their confidence this cycle (active
 /// ones only), with what is wrong with each.
-fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, String)> {
+fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, trackers: &StereoTrackerSet) -> Vec<(Role, View, LossCause)> {
     let (gripper, target) = needs_trackers(phase);
     let mut lost = Vec::new();
     for (role, needed) in [(Role::Gripper, gripper), (Role::Target, target)] {
@@ -46,9 +46,9 @@ fn lost_trackers(cfg: &SafetyConfig, phase: Phase, states: &StereoStates, tracke
             let min = if role == Role::Target { cfg.min_target_score } else { cfg.min_tracker_score };
             let score = trackers.get(role, view).map_or(0.0, |t| t.confidence().score);
             match states.get(role, view) {
-                Some(TrackState::Lost(why)) => lost.push((role, view, why.to_string())),
-                None => lost.push((role, view, "did not run".to_string())),
-                Some(TrackState::Tracking) if score.is_nan() || score < min => lost.push((role, view, format!("confidence {score:.2} < {min}"))),
+                Some(TrackState::Lost(why)) => lost.push((role, view, LossCause::Tracker(why))),
+                None => lost.push((role, view, LossCause::DidNotRun)),
+                Some(TrackState::Tracking) if score.is_nan() || score < min => lost.push((role, view, LossCause::Unsure { score, min })),
                 Some(TrackState::Tracking) => {}
             }
         }
@@ -252,11 +252,12 @@ impl HardLoop {
         }
         let Some(rec) = self.recovery.as_mut() else { return Cmd::HOLD };
         for (role, view, why) in lost_trackers(&self.mission.cfg.safety, phase, states, &self.mission.trackers) {
-            rec.add(&mut self.mission.trackers, role, view, &why, &self.last_good, now_ns);
+            rec.add(&mut self.mission.trackers, role, view, why, &self.last_good, now_ns);
         }
         let epipolar = self.mission.calibration.get().map(|cal| EpipolarCheck {
             constraint: cal.model.epipolar(),
             tol_px: 2.0 * self.mission.cfg.target.max_epipolar_px,
+            plate_tol_px: crate::recovery::plate_tol_px(cal.stats.residual_rms_px, cal.stats.epipolar_rms_px),
         });
         match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
             RecoveryStep::Searching => Cmd::HOLD,
