@@ -69,7 +69,11 @@ pub enum LossCause {
 
 impl LossCause {
     /// The tracker was declared locked on something that is not its contour: the shape it
-    /// holds now is that wrong lock.
+    /// holds now is that wrong lock. A crossed side (`LostReason::CrossedSide`, also reported
+    /// as `wrong_lock`) is not counted: it fires within two updates of a side starting to
+    /// cross (the shape still within a few px of the face) and also when an occluder of the
+    /// outside's grey covers a stretch, so the shape it leaves is usually the face's own and
+    /// refusing it would refuse the recovery itself.
     pub fn is_wrong_lock(&self) -> bool {
         matches!(self, LossCause::Tracker(LostReason::WrongLock { .. }))
     }
