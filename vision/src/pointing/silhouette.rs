@@ -286,8 +286,10 @@ impl SilhouetteFinder {
                 }
             }
         }
-        // The midpoints (s, middle t, width) of clean sections.
+        // The midpoints (s, middle t, width) of sections away from the border; `keep` marks
+        // (for now) those with an end on a scene edge.
         self.mids.clear();
+        self.keep.clear();
         for s in 0..span {
             // A section next to one touching the border may be cut too.
             let near_border = self.border[s.saturating_sub(2)..(s + 3).min(span)].iter().any(|&b| b);
@@ -304,12 +306,11 @@ impl SilhouetteFinder {
                         _ => true,
                     }
                 };
-                if on_scene_edge(lo, -1.0) || on_scene_edge(hi, 1.0) {
-                    continue;
-                }
                 self.mids.push([along, 0.5 * (lo + hi), hi - lo + 1.0]);
+                self.keep.push(on_scene_edge(lo, -1.0) || on_scene_edge(hi, 1.0));
             }
         }
+        self.drop_cut_sections();
         // Keep sections inside a part of even width (finger, hand, forearm): where the width
         // steps (the knuckles, the wrist, the fingertip's end face), the silhouette's edges are
         // the images of end faces seen at a slant, and their middle is off the axis.
@@ -350,6 +351,35 @@ impl SilhouetteFinder {
             return Err(SilhouetteError::TooFewSections { sections: fit.count });
         }
         Ok(fit)
+    }
+
+    /// Drops the sections (marked in `keep`) with an end on a scene edge that are narrower
+    /// than the nearest clean sections beside them. An edge in the scene (the robot's base)
+    /// may be an occluder cutting the arm there, which shortens the section and moves its
+    /// middle; but an arm in front of the edge keeps its width, and dropping all such
+    /// sections loses a finger that crosses the base. A marked section with no clean
+    /// neighbour is dropped: nothing says it is whole.
+    fn drop_cut_sections(&mut self) {
+        let n = self.mids.len();
+        let step = self.config.max_width_step_px;
+        let mut out = 0;
+        for i in 0..n {
+            let whole = !self.keep[i] || {
+                let before = (0..i).rev().find(|&j| !self.keep[j]).map(|j| self.mids[j][2]);
+                let after = (i + 1..n).find(|&j| !self.keep[j]).map(|j| self.mids[j][2]);
+                let narrowest = match (before, after) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
+                narrowest.is_some_and(|w| self.mids[i][2] >= w - step)
+            };
+            if whole {
+                self.mids[out] = self.mids[i];
+                out += 1;
+            }
+        }
+        self.mids.truncate(out);
+        self.keep.clear();
     }
 
     /// The finger's sections (a range of `mids`): the run of narrow sections at the narrow

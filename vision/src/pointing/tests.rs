@@ -242,3 +242,28 @@ fn a_sliver_off_a_blob_is_not_taken_for_a_finger() {
     let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
     assert_eq!(finder.find(&noisy(&bg, &mut rng).view(), &frame.view()), Err(SilhouetteError::NotElongated));
 }
+
+#[test]
+fn a_finger_in_front_of_a_scene_edge_keeps_its_sections() {
+    // A finger crossing a grey strip of the scene as wide as itself (the robot's base seen
+    // along the finger): the finger's edges lie on the strip's edges there. The finger is in
+    // front, so those sections keep its width and its middle; dropping them (as if the strip
+    // hid the finger) left too little finger, and the line followed the hand, bent 20°.
+    let mut bg = scene(13);
+    let tip = [150.0, 240.0];
+    for y in 235..=245 {
+        for x in 168..200 {
+            bg.set(x, y, 120);
+        }
+    }
+    let mut rng = SplitMix64::new(5);
+    let finger = with_parts(&bg, tip, [1.0, 0.0], &[(0.0, 70.0, 5.0)]);
+    let bend = 20f64.to_radians();
+    let frame = noisy(&with_parts(&finger, [tip[0] + 70.0, tip[1]], [bend.cos(), bend.sin()], &[(0.0, 200.0, 14.0)]), &mut rng);
+    let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+    let axis = finder.find(&noisy(&bg, &mut rng).view(), &frame.view()).unwrap_or_else(|e| panic!("{e}"));
+    let l = axis.line.0;
+    let off = |p: [f64; 2]| l[0] * p[0] + l[1] * p[1] + l[2];
+    let knuckle = [tip[0] + 65.0, tip[1]];
+    assert!(off(tip).abs() < 1.5 && off(knuckle).abs() < 1.5, "line {:.2} px off the tip, {:.2} px off the knuckle", off(tip), off(knuckle));
+}
