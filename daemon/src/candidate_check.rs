@@ -38,6 +38,16 @@ pub fn plate_tol_px(fit_rms_px: f64, epipolar_rms_px: f64) -> f64 {
     (PLATE_EPIPOLAR_SIGMAS * fit_rms_px.max(epipolar_rms_px)).max(MIN_PLATE_EPIPOLAR_TOL_PX)
 }
 
+/// The other camera's view.
+pub(crate) fn other(view: View) -> View {
+    if view == View::Left { View::Right } else { View::Left }
+}
+
+/// The tracker of `role` in `view` if it is active and tracking.
+pub(crate) fn tracked(trackers: &StereoTrackerSet, role: Role, view: View) -> Option<&ContourTracker> {
+    trackers.is_active(role, view).then(|| trackers.get(role, view)).flatten().filter(|t| t.state().is_tracking())
+}
+
 fn centroid(t: &ContourTracker) -> Vector2<f64> {
     let n = t.corners().len().max(1) as f64;
     t.corners().sum::<Vector2<f64>>() / n
@@ -63,7 +73,7 @@ fn inside(poly: &[Vector2<f64>], p: Vector2<f64>) -> bool {
 /// sat 69 px off the constraint): `mate_plate`, the other view's plate origin to check
 /// against (`Recovery::mate_plate`; `None`: no check).
 pub(crate) fn plausible(cand: &ContourTracker, role: Role, view: View, trackers: &StereoTrackerSet, epipolar: Option<&EpipolarCheck>, mate_plate: Option<Vector2<f64>>) -> bool {
-    let tracked = |r: Role, v: View| trackers.is_active(r, v).then(|| trackers.get(r, v)).flatten().filter(|t| t.state().is_tracking());
+    let tracked = |r: Role, v: View| tracked(trackers, r, v);
     let other_role = if role == Role::Gripper { Role::Target } else { Role::Gripper };
     if let Some(o) = tracked(other_role, view) {
         let poly: Vec<Vector2<f64>> = o.corners().collect();
@@ -72,10 +82,9 @@ pub(crate) fn plausible(cand: &ContourTracker, role: Role, view: View, trackers:
             return false;
         }
     }
-    let other_view = if view == View::Left { View::Right } else { View::Left };
     if role == Role::Target
         && let Some(e) = epipolar
-        && let Some(mate) = tracked(Role::Target, other_view)
+        && let Some(mate) = tracked(Role::Target, other(view))
     {
         let (l, r) = if view == View::Left { (centroid(cand), centroid(mate)) } else { (centroid(mate), centroid(cand)) };
         let residual = |l: Vector2<f64>, r: Vector2<f64>| e.constraint.residual_px(&[l.x, l.y, r.x, r.y]);

@@ -31,7 +31,7 @@ use handeye_vision::image::ImageView;
 use handeye_vision::tracker::{ContourTracker, LostReason, Role, StereoTrackerSet, TemplateFrame, View};
 use nalgebra::Vector2;
 
-use crate::candidate_check::{plausible, same_lock};
+use crate::candidate_check::{other, plausible, same_lock, tracked};
 pub use crate::candidate_check::{plate_tol_px, EpipolarCheck, MIN_PLATE_EPIPOLAR_TOL_PX, PLATE_EPIPOLAR_SIGMAS, REFUSED_LOCK_TOL_PX};
 use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
 
@@ -288,18 +288,13 @@ impl Recovery {
     /// tracked) is refused here and found by the jaws' motion instead: when in doubt the arm
     /// holds.
     fn mate_plate(&self, trackers: &StereoTrackerSet, view: View) -> Option<Vector2<f64>> {
-        let other = if view == View::Left { View::Right } else { View::Left };
-        if self.slots.iter().any(|s| s.role == Role::Target) && View::ALL.into_iter().any(|v| self.slots.iter().filter(|s| s.view == v).count() == 2) {
+        // A view with two slots has lost both its contours (one slot per role and view).
+        if View::ALL.into_iter().any(|v| self.slots.iter().filter(|s| s.view == v).count() == 2) {
             return None;
         }
-        match self.slots.iter().find(|s| s.role == Role::Gripper && s.view == other) {
+        match self.slots.iter().find(|s| s.role == Role::Gripper && s.view == other(view)) {
             Some(s) if s.found.is_none() => Some(s.base.origin),
-            _ => trackers
-                .is_active(Role::Gripper, other)
-                .then(|| trackers.get(Role::Gripper, other))
-                .flatten()
-                .filter(|t| t.state().is_tracking())
-                .map(|t| t.frame().origin),
+            _ => tracked(trackers, Role::Gripper, other(view)).map(|t| t.frame().origin),
         }
     }
 
