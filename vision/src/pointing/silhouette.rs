@@ -362,17 +362,30 @@ impl SilhouetteFinder {
     fn drop_cut_sections(&mut self) {
         let n = self.mids.len();
         let step = self.config.max_width_step_px;
+        // Which sections stay, decided on the sections as they are: compacting `mids` while
+        // deciding would shift the neighbours a later section is compared with.
+        let mut next_clean = vec![None; n];
+        let mut clean = None;
+        for i in (0..n).rev() {
+            next_clean[i] = clean;
+            if !self.keep[i] {
+                clean = Some(self.mids[i][2]);
+            }
+        }
+        let mut previous_clean: Option<f64> = None;
         let mut out = 0;
         for i in 0..n {
+            let width = self.mids[i][2];
             let whole = !self.keep[i] || {
-                let before = (0..i).rev().find(|&j| !self.keep[j]).map(|j| self.mids[j][2]);
-                let after = (i + 1..n).find(|&j| !self.keep[j]).map(|j| self.mids[j][2]);
-                let narrowest = match (before, after) {
+                let narrowest = match (previous_clean, next_clean[i]) {
                     (Some(a), Some(b)) => Some(a.min(b)),
                     (a, b) => a.or(b),
                 };
-                narrowest.is_some_and(|w| self.mids[i][2] >= w - step)
+                narrowest.is_some_and(|w| width >= w - step)
             };
+            if !self.keep[i] {
+                previous_clean = Some(width);
+            }
             if whole {
                 self.mids[out] = self.mids[i];
                 out += 1;
@@ -468,4 +481,24 @@ fn principal(pixels: &[(u16, u16)]) -> Option<([f64; 2], [f64; 2], f64)> {
     }
     let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
     Some(([cx, cy], [theta.cos(), theta.sin()], (l1 / l2).sqrt()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_section_on_a_scene_edge_is_judged_against_its_own_clean_neighbours() {
+        // Widths along the arm; `true`: an end on a scene edge. Section 1 is cut (narrower
+        // than its clean neighbours 0 and 2) and goes. Section 4 is as wide as the clean
+        // section 2 before it and stays, though the wide marked section 3 sits between them;
+        // compacting while deciding once compared it with section 3's width (10) instead.
+        let widths = [(10.0, false), (1.0, true), (3.0, false), (10.0, true), (3.5, true), (10.0, false)];
+        let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+        finder.mids = widths.iter().enumerate().map(|(i, &(w, _))| [i as f64, 0.0, w]).collect();
+        finder.keep = widths.iter().map(|&(_, marked)| marked).collect();
+        finder.drop_cut_sections();
+        let kept: Vec<f64> = finder.mids.iter().map(|m| m[0]).collect();
+        assert_eq!(kept, [0.0, 2.0, 3.0, 4.0, 5.0]);
+    }
 }
