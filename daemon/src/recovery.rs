@@ -32,7 +32,7 @@ use handeye_vision::tracker::{ContourTracker, LostReason, Role, StereoTrackerSet
 use nalgebra::Vector2;
 
 use crate::candidate_check::{other, plausible, same_lock, tracked};
-pub use crate::candidate_check::{plate_tol_px, EpipolarCheck, MIN_PLATE_EPIPOLAR_TOL_PX, PLATE_EPIPOLAR_SIGMAS, REFUSED_LOCK_TOL_PX};
+pub use crate::candidate_check::{EpipolarCheck, REFUSED_LOCK_TOL_PX};
 use crate::track_search::{SearchSettings, SearchStep, ShiftSearch};
 
 /// Widest shift searched, px (a 3° pan at f = 1800 px is ~94 px).

@@ -2,6 +2,7 @@
 //! plates located by the jaws.
 
 use super::*;
+use crate::candidate_check::plate_tol_px;
 use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{ContourTracker, LostReason, TrackerConfig};
 

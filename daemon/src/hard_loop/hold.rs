@@ -257,7 +257,7 @@ impl HardLoop {
         let epipolar = self.mission.calibration.get().map(|cal| EpipolarCheck {
             constraint: cal.model.epipolar(),
             tol_px: 2.0 * self.mission.cfg.target.max_epipolar_px,
-            plate_tol_px: crate::recovery::plate_tol_px(cal.stats.residual_rms_px, cal.stats.epipolar_rms_px),
+            plate_tol_px: crate::candidate_check::plate_tol_px(cal.stats.residual_rms_px, cal.stats.epipolar_rms_px),
         });
         match rec.step(&mut self.mission.trackers, left, right, now_ns, epipolar.as_ref()) {
             RecoveryStep::Searching => Cmd::HOLD,
