@@ -9,7 +9,7 @@
 //! the wrong edge.
 
 use super::contour::TemplateEdge;
-use super::search::PointEdges;
+use super::search::{PointEdges, MAX_CANDIDATES};
 
 /// Bins of the rival histogram: offsets of ±47 px in 1 px steps (the search reaches ±40).
 const RIVAL_BINS: usize = 95;
@@ -128,24 +128,46 @@ pub(crate) fn strongest_rival(
             support += usize::from(fitted.is_finite() && found.iter().any(|c| (f64::from(c.h_px) - fitted).abs() <= band_px));
         }
         // A rival holds at most the points with an edge: none can outnumber the side by
-        // `margin` and hold most of its points.
-        if with_edge < support + margin || 2 * with_edge <= side.count {
+        // `margin` and hold most of its points, nor make it the side outnumbered the most
+        // (the first of equals stays).
+        if with_edge < support + margin || 2 * with_edge <= side.count || with_edge as i64 - support as i64 <= best_excess {
             continue;
         }
-        let (mut rival, mut offset, mut turn) = (0usize, 0i64, 0.0);
+        // Only a line with more than `floor` points can make this side the best; the running
+        // maximum starts there (the first line with the side's most points is the same).
+        let floor = (best_excess.saturating_add(support as i64)).max(0) as usize;
+        let (mut rival, mut offset, mut turn) = (floor, 0i64, 0.0);
         for &turn_px in turns {
+            // No line holds more than the points with an edge.
+            if rival >= with_edge {
+                break;
+            }
             let slope = if side.count > 1 { turn_px / (side.count as f64 - 1.0) } else { 0.0 };
-            let mut votes = [0u16; RIVAL_BINS];
-            // The last point that voted for each line, counted from 1 along the side.
-            let mut voter = [0u16; RIVAL_BINS];
+            // The votes as differences between neighbouring bins: each point adds the union
+            // of its edges' bin ranges once, as runs (its edges taken in order along the line,
+            // each run starts past the last one's end).
+            let mut steps = [0i32; RIVAL_BINS + 1];
+            let (mut first, mut last) = (RIVAL_BINS, 0usize);
             for (j, i) in (side.first..side.first + side.count).enumerate() {
                 let fitted = fitted_px[i] + slope * (j as f64 - mid);
-                let j = j as u16 + 1;
                 if !fitted.is_finite() {
                     continue;
                 }
-                for c in edges[i].as_slice() {
-                    let r = f64::from(c.h_px) - fitted;
+                let (found, mut h) = (edges[i].as_slice(), [0f64; MAX_CANDIDATES]);
+                for (k, c) in found.iter().enumerate() {
+                    // Insertion into the sorted prefix (at most 4 edges).
+                    let v = f64::from(c.h_px);
+                    let mut m = k;
+                    while m > 0 && h[m - 1] > v {
+                        h[m] = h[m - 1];
+                        m -= 1;
+                    }
+                    h[m] = v;
+                }
+                // The first bin this point has not voted for.
+                let mut next = 0usize;
+                for &h in &h[..found.len()] {
+                    let r = h - fitted;
                     // Bins `lo..=hi` (offset + `half`, so never negative here): the lines
                     // within `band_px` of this edge. Truncation is `floor` for the positive
                     // values kept; `f64::floor` would be a library call on the baseline x86-64
@@ -157,24 +179,30 @@ pub(crate) fn strongest_rival(
                     let lo = from.max(0.0) as usize;
                     let lo = if (lo as f64) < from { lo + 1 } else { lo };
                     let hi = (to.min(2.0 * half_f) as usize).min(RIVAL_BINS - 1);
-                    for b in lo..=hi {
-                        // Without a branch: which point voted last is unpredictable.
-                        votes[b] += u16::from(voter[b] != j);
-                        voter[b] = j;
+                    let lo = lo.max(next);
+                    if lo > hi {
+                        continue;
                     }
+                    steps[lo] += 1;
+                    steps[hi + 1] -= 1;
+                    next = hi + 1;
+                    first = first.min(lo);
+                    last = last.max(hi);
                 }
             }
             // A line qualifies where it is far enough from the side at one end (`o ± turn/2`).
             let reach = 0.5 * turn_px.abs();
             let pull = template_px.get(s).copied();
-            for (b, &v) in votes.iter().enumerate() {
-                let o = b as i64 - half;
-                let ends = (o as f64 - 0.5 * turn_px, o as f64 + 0.5 * turn_px);
-                if (o as f64).abs() + reach >= min_offset
-                    && usize::from(v) > rival
-                    && pull.is_none_or(|d| template_pulls_towards(ends.0, ends.1, d))
-                {
-                    (rival, offset, turn) = (usize::from(v), o, turn_px);
+            let mut votes = 0i32;
+            for b in first..=last.min(RIVAL_BINS - 1) {
+                votes += steps[b];
+                let (o, v) = (b as i64 - half, votes as usize);
+                // The count first: most lines hold fewer points than the best so far.
+                if v > rival && (o as f64).abs() + reach >= min_offset {
+                    let ends = (o as f64 - 0.5 * turn_px, o as f64 + 0.5 * turn_px);
+                    if pull.is_none_or(|d| template_pulls_towards(ends.0, ends.1, d)) {
+                        (rival, offset, turn) = (v, o, turn_px);
+                    }
                 }
             }
         }
