@@ -305,6 +305,7 @@ pub fn reason_name(r: &RejectReason) -> &'static str {
         RejectReason::FingerCollision { .. } => "finger_collision",
         RejectReason::BodyCollision { .. } => "body_collision",
         RejectReason::NotHighest => "not_highest",
+        RejectReason::ThicknessUnmeasured => "thickness_unmeasured",
     }
 }
 

@@ -13,7 +13,7 @@ fn progress(r: &Rejection) -> u8 {
     match &r.reason {
         RejectReason::FingerCollision { .. } | RejectReason::BodyCollision { .. } if thin_wall => 1,
         RejectReason::FacetNotVertical { .. } => 0,
-        RejectReason::TurnedFromViewer { .. } | RejectReason::NoTopEdge | RejectReason::TopEdgeSlopeUnsettled { .. } => 1,
+        RejectReason::TurnedFromViewer { .. } | RejectReason::NoTopEdge | RejectReason::TopEdgeSlopeUnsettled { .. } | RejectReason::ThicknessUnmeasured => 1,
         RejectReason::TopEdgeTooSteep { .. } => 2,
         RejectReason::NoOverlap | RejectReason::RearInFront { .. } => 3,
         RejectReason::RearOutOfReach { .. } => 4,
@@ -114,6 +114,7 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
             RejectReason::TooWide { width_m } => format!("across its {name} it is {:.0} mm wide, more than the jaws' {:.0} mm", width_m * 1e3, config.gripper.max_width_m * 1e3),
             RejectReason::FingerCollision { .. } => format!("a finger at its {name} would hit something"),
             RejectReason::BodyCollision { .. } | RejectReason::NotHighest => format!("the gripper's body at its {name} would hit something"),
+            RejectReason::ThicknessUnmeasured => format!("nothing seen behind its {name} says how thick it is"),
         };
         if !phrases.contains(&phrase) {
             phrases.push(phrase);

@@ -7,7 +7,10 @@
 //! 2. Only one side of an object is seen, so the opposite face is hypothesised: a *rear edge*
 //!    parallel to the top edge, on the same connected component, behind the facet (as seen
 //!    from the cameras), not one of the facet's own edges. The top edge itself may serve
-//!    (zero width: a thin wall).
+//!    (zero width: a thin wall) only as far as the collision tests; it is never grasped, as
+//!    nothing measured says the block is that thin (a block whose top falls away behind the
+//!    face, or whose top face was missed, looks the same). A thin wall is grasped across its
+//!    measured rear edge.
 //! 3. Of each (top edge, rear edge) pair only the most central site is tried: the middle of
 //!    the stretch where both edges overlap along the top edge. Its width (horizontal distance
 //!    between the two surfaces) must be at most 50 mm.
@@ -277,6 +280,9 @@ pub enum RejectReason {
     BodyCollision { feature: FeatureRef },
     /// Collision-free, but a higher site on the same facet is kept.
     NotHighest,
+    /// The top edge paired with itself (the thin-wall hypothesis), collision-free, but with
+    /// no rear edge or face measured behind it: the block's thickness was not seen.
+    ThicknessUnmeasured,
 }
 
 /// A pair of contact points: where the fingers would close.
@@ -672,6 +678,13 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
                 let body = [Rect { g: [-0.5 * g.body_length_m, 0.5 * g.body_length_m], h: [-0.5 * g.body_thickness_m, 0.5 * g.body_thickness_m] }];
                 if let Some(feature) = first_collision(scene, &frame, &body, front_m[2] + g.body_clearance_m, |_| false, &mut scratch) {
                     rejected.push(reject(Some(site), RejectReason::BodyCollision { feature }));
+                    continue;
+                }
+                // The thin-wall pairing passes the collision tests only because nothing was seen
+                // behind the face; a top sloping away or a top face the reconstruction missed
+                // is as likely as a wall, and the rear finger would come down on it.
+                if rear_ref == (EdgeRef::Facet { facet: fi, edge: ei }) {
+                    rejected.push(reject(Some(site), RejectReason::ThicknessUnmeasured));
                     continue;
                 }
                 facet_sites.push(Grasp {

@@ -104,9 +104,9 @@ fn sloped_top(slope_deg: f64) -> GraspScene {
 fn top_edges_within_30_degrees_of_horizontal_only() {
     let ok = plan(&sloped_top(29.0));
     let g = ok.chosen.expect("a 29° top edge is usable");
-    // Equally high, the 30 mm pairing beats the top edge's zero-width pairing with itself.
+    // The 30 mm pairing, not the top edge's zero-width pairing with itself (never grasped).
     assert_eq!(g.site.rear_edge, EdgeRef::Loose(0));
-    assert!(ok.rejected.iter().any(|r| r.reason == RejectReason::NotHighest && r.rear_edge == Some(EdgeRef::Facet { facet: 0, edge: 2 })));
+    assert!(ok.rejected.iter().any(|r| r.reason == RejectReason::ThicknessUnmeasured && r.rear_edge == Some(EdgeRef::Facet { facet: 0, edge: 2 })));
     assert!((g.site.width_m - 0.03).abs() < 1e-12);
     let no = plan(&sloped_top(31.0));
     assert!(no.chosen.is_none());
@@ -128,15 +128,29 @@ fn width_at_most_50_mm() {
 }
 
 #[test]
-fn zero_width_grasps_of_thin_walls_are_allowed() {
-    // A wall seen face-on, no top face reconstructed: the top edge is its own rear edge.
+fn a_thin_wall_is_grasped_only_across_a_measured_rear_edge() {
+    // A face 40 mm tall (past the fingers' 25 mm) seen face-on, nothing reconstructed behind
+    // it: a wall, or a block whose top falls away behind the face (random seed 12: a wedge
+    // whose top drops 33 mm behind it), or whose top face was missed. The top edge paired
+    // with itself passes the collision tests only because nothing was seen: never grasped.
     let wall = facet(vec![p(0.0, 0.0, 0.0), p(0.0, 0.06, 0.0), p(0.0, 0.06, 0.04), p(0.0, 0.0, 0.04)], 0);
-    let g = plan(&scene(vec![wall], vec![])).chosen.expect("a grasp on the wall");
-    assert_eq!(g.site.rear_edge, EdgeRef::Facet { facet: 0, edge: 2 });
+    let unseen = plan(&scene(vec![wall.clone()], vec![]));
+    assert!(unseen.chosen.is_none(), "{:?}", unseen.chosen);
+    let r: Vec<_> = unseen.rejected.iter().filter(|x| x.reason == RejectReason::ThicknessUnmeasured).collect();
+    assert_eq!(r.len(), 1, "{:?}", unseen.rejected);
+    assert_eq!(r[0].rear_edge, Some(EdgeRef::Facet { facet: 0, edge: 2 }));
+    assert!(r[0].site.is_some_and(|s| s.width_m.abs() < 1e-12 && (s.front_m - p(0.0, 0.03, 0.04)).norm() < 1e-12));
+    // What was seen does not settle it: no refusal, and the user is told why.
+    assert!(!refusal_grounded(&scene(vec![wall.clone()], vec![]), &unseen.rejected, |_| Some("+x face".into())));
+    assert_eq!(why_no_grasp(&unseen.rejected, |_| Some("+x face".into()), &GraspConfig::default()), "nothing seen behind its +x face says how thick it is");
+    // The wall's back edge measured 3 mm behind its face: grasped across it.
+    let back = SceneEdge { segment: Segment3::new(p(-0.003, 0.0, 0.04), p(-0.003, 0.06, 0.04)), component: 0 };
+    let g = plan(&scene(vec![wall], vec![back])).chosen.expect("a grasp across the measured wall");
+    assert_eq!(g.site.rear_edge, EdgeRef::Loose(0));
     assert_eq!(g.site.front_edge, 2);
-    assert!(g.site.width_m.abs() < 1e-12);
+    assert!((g.site.width_m - 0.003).abs() < 1e-12);
     assert!((g.site.front_m - p(0.0, 0.03, 0.04)).norm() < 1e-12, "the most central site");
-    assert!((g.opening_m - 0.02).abs() < 1e-12);
+    assert!((g.opening_m - 0.023).abs() < 1e-12);
 }
 
 #[test]
