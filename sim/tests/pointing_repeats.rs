@@ -89,13 +89,13 @@ fn every_gesture_of_the_seeds() {
                 state = tracker.update(&l, &r);
                 match state {
                     GestureState::Indicated(_) => break,
-                    GestureState::Degenerate { .. } | GestureState::Uncertain { .. } => {
+                    GestureState::Degenerate { .. } | GestureState::Uncertain { .. } | GestureState::Disagree { .. } => {
                         refusal = Some(state)
                     }
                     GestureState::Unsteady { .. } | GestureState::NoLine { .. } => {
                         if !matches!(
                             refusal,
-                            Some(GestureState::Degenerate { .. } | GestureState::Uncertain { .. })
+                            Some(GestureState::Degenerate { .. } | GestureState::Uncertain { .. } | GestureState::Disagree { .. })
                         ) {
                             refusal = Some(state);
                         }

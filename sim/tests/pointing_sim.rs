@@ -97,9 +97,9 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
             match state {
                 GestureState::Indicated(_) => break,
                 // One from a steady window stands over a later unsteady or no line.
-                GestureState::Degenerate { .. } | GestureState::Uncertain { .. } => refusal = Some(state),
+                GestureState::Degenerate { .. } | GestureState::Uncertain { .. } | GestureState::Disagree { .. } => refusal = Some(state),
                 GestureState::Unsteady { .. } | GestureState::NoLine { .. } => {
-                    if !matches!(refusal, Some(GestureState::Degenerate { .. } | GestureState::Uncertain { .. })) {
+                    if !matches!(refusal, Some(GestureState::Degenerate { .. } | GestureState::Uncertain { .. } | GestureState::Disagree { .. })) {
                         refusal = Some(state);
                     }
                 }

@@ -516,7 +516,7 @@ mod tests {
         assert_eq!(t.validate().unwrap_err().key(), "enum");
         let t = Telemetry { phase: Phase::Point as u32, pointing_state: PointingState::Indicated as u32, pointing_point_m: [0.4, 0.02], ..Telemetry::default() };
         assert_eq!(t.validate(), Ok(()));
-        let t = Telemetry { pointing_state: 8, ..Telemetry::default() };
+        let t = Telemetry { pointing_state: 9, ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "enum");
         let t = Telemetry { pointing_line_px: [[0.0, 1.0, f32::INFINITY], [f32::NAN; 3]], ..Telemetry::default() };
         assert_eq!(t.validate().unwrap_err().key(), "non_finite");

@@ -364,6 +364,8 @@ pub enum PointingState {
     Unsteady = 6,
     /// Refused: no finger line in one view or both.
     NoLine = 7,
+    /// Refused: the views disagree (the point lies behind the fingertip in one view).
+    Disagree = 8,
 }
 
 impl PointingState {
@@ -377,6 +379,7 @@ impl PointingState {
             5 => Self::Uncertain,
             6 => Self::Unsteady,
             7 => Self::NoLine,
+            8 => Self::Disagree,
             _ => return None,
         })
     }
@@ -391,6 +394,7 @@ impl PointingState {
             Self::Uncertain => "uncertain",
             Self::Unsteady => "unsteady",
             Self::NoLine => "no_line",
+            Self::Disagree => "disagree",
         }
     }
 }
@@ -560,10 +564,10 @@ mod tests {
             assert_eq!(Phase::from_u32(p).map(|x| x as u32), Some(p));
         }
         assert_eq!(Phase::from_u32(13), None);
-        for p in 0..8 {
+        for p in 0..9 {
             assert_eq!(PointingState::from_u32(p).map(|x| x as u32), Some(p));
         }
-        assert_eq!(PointingState::from_u32(8), None);
+        assert_eq!(PointingState::from_u32(9), None);
         // The point phase comes between calibrate and plan, whatever its number.
         assert!(Phase::Calibrate.order() < Phase::Point.order() && Phase::Point.order() < Phase::Plan.order());
     }

@@ -16,7 +16,7 @@ pub struct GestureRecord {
     pub frame_id: u64,
     /// Camera time of the cycle that took it, s since the daemon's first frame.
     pub time_s: f64,
-    /// `indicated`, `degenerate`, `uncertain`, `unsteady` or `no_line`.
+    /// `indicated`, `degenerate`, `uncertain`, `disagree`, `unsteady` or `no_line`.
     pub outcome: String,
     /// The indicated point, robot frame, m (`indicated` only).
     pub point_m: Option<[f64; 3]>,
@@ -89,6 +89,7 @@ fn state_name(s: &GestureState) -> &'static str {
         GestureState::Uncertain { .. } => PointingState::Uncertain,
         GestureState::Unsteady { .. } => PointingState::Unsteady,
         GestureState::NoLine { .. } => PointingState::NoLine,
+        GestureState::Disagree { .. } => PointingState::Disagree,
     };
     p.name()
 }
@@ -229,6 +230,7 @@ impl PointingRecord {
             }
             GestureState::Unsteady { .. } => PointingState::Unsteady,
             GestureState::NoLine { .. } => PointingState::NoLine,
+            GestureState::Disagree { .. } => PointingState::Disagree,
         } as u32;
     }
 }

@@ -131,7 +131,7 @@ pub struct ObservedGesture {
     /// clock, ns).
     pub frame_id: u64,
     pub capture_time_ns: u64,
-    /// `indicated`, `degenerate`, `uncertain`, `unsteady` or `no_line`.
+    /// `indicated`, `degenerate`, `uncertain`, `disagree`, `unsteady` or `no_line`.
     pub outcome: String,
     /// The indicated point: plane x, y and the plane file's `plane_z_m`, m.
     pub point_m: Option<[f64; 3]>,
@@ -381,6 +381,7 @@ fn refusal_name(s: &GestureState) -> &'static str {
         GestureState::Uncertain { .. } => "uncertain",
         GestureState::Unsteady { .. } => "unsteady",
         GestureState::NoLine { .. } => "no line",
+        GestureState::Disagree { .. } => "disagree",
         _ => "",
     }
 }

@@ -96,9 +96,10 @@ pub fn plane_maps_from(cage_robot_m: &[Vector3<f64>], cage_image_px: &[[f64; 4]]
     Ok((Pointing::new(fit(0)?, fit(1)?), z, cams.residual_rms_px))
 }
 
-/// A refusal that came from a steady window (the hand held still: uncertain, degenerate).
+/// A refusal that came from a steady window (the hand held still: uncertain, degenerate,
+/// disagree).
 fn steady_refusal(outcome: &str) -> bool {
-    matches!(outcome, "uncertain" | "degenerate")
+    matches!(outcome, "uncertain" | "degenerate" | "disagree")
 }
 
 /// Both plate trackers track on this frame.
@@ -146,6 +147,10 @@ pub(crate) fn record(r: &GestureResult, time_ns: u64, plane_z_m: f64) -> Option<
             sigma_mm: Some(sigma_m * 1e3),
             ..base("uncertain", format!("too little of the finger measured (one-sigma radius {:.1} mm)", sigma_m * 1e3))
         },
+        GestureState::Disagree { view, behind_px } => base(
+            "disagree",
+            format!("the views disagree: the point lies {behind_px:.0} px behind the fingertip in the {} view", if view == 0 { "left" } else { "right" }),
+        ),
         GestureState::Unsteady { frames } => base("unsteady", format!("the hand did not hold still in {frames} frames")),
         GestureState::NoLine { frames, views } => {
             base("no_line", format!("no finger line in {} view(s) over {frames} frames (seen end-on, hidden or cut by the border)", 2 - views))
@@ -231,7 +236,7 @@ impl PointPhase {
                             m.reporting.snapshot("point_refused");
                         }
                         // The most telling refusal stands: one from a steady window
-                        // (uncertain, degenerate) over a later "unsteady" or "no line" of the
+                        // (uncertain, degenerate, disagree) over a later "unsteady" or "no line" of the
                         // same hand.
                         if refusal.as_ref().is_none_or(|old| steady_refusal(&g.outcome) >= steady_refusal(&old.outcome)) {
                             *refusal = Some(Box::new(g));

@@ -74,6 +74,11 @@ pub enum GestureState {
     /// Still, but the point's one-sigma radius `sigma_m` is over `max_sigma_m`: too little
     /// of the finger's line was measured to trust where it meets the plane.
     Uncertain { sigma_m: f64 },
+    /// Still, but the views disagree: the plane lines meet at a point whose image in view
+    /// `view` (0 left, 1 right) lies `behind_px` behind the fingertip, against the finger's
+    /// direction there. A finger points ahead of its tip; such a point is a wrong line in one
+    /// view (a stub's direction, a fit on the hand), not an answer.
+    Disagree { view: usize, behind_px: f64 },
     /// In view for `frames` without holding still.
     Unsteady { frames: usize },
     /// In view for `frames`, but with no finger line in one view or both (`views` have one):
@@ -191,23 +196,29 @@ impl PointingTracker {
             Err(PointingError::NearlyParallel { angle_rad }) => return GestureState::Degenerate { crossing_rad: angle_rad },
             Err(_) => return GestureState::Degenerate { crossing_rad: 0.0 },
         };
-        // Uncertainty: each view's line turned by its angle error about its centre, and
+        // Uncertainty: each view's line turned by its angle error about its pivot, and
         // shifted by its offset error, carried through the intersection; the four effects
-        // add in quadrature. Each error is the fit's own or the window's jitter, whichever is
-        // larger: the frames' lines scattered about the mean line in offset (at the centre)
-        // and in angle. The angle's jitter matters where the fit turns between the finger's
-        // midline and the whole arm's from frame to frame (a finger over the robot or cut by
-        // the border): the centres stay put, the lines fan out, and the mean line is no
-        // surer than that fan.
+        // add in quadrature. The pivot is where the line is located: the sections' centre for
+        // a line fitted along the arm (its angle and offset errors are independent there),
+        // the fingertip for a stub (`sections` 0: a tip and a direction from the root). A stub
+        // seen end-on has its ray through the tip close to the indicated point, so turning it
+        // about the tip moves the point little, and its large angle sigma costs little. Each
+        // error is the fit's own or the window's jitter, whichever is larger: the frames' lines
+        // scattered about the mean line in offset (at the centre) and in angle. The angle's
+        // jitter matters where the fit turns between the finger's midline and the whole arm's
+        // from frame to frame (a finger over the robot or cut by the border): the centres stay
+        // put, the lines fan out, and the mean line is no surer than that fan.
         let mut var = 0.0;
         let count = self.history.len() as f64;
         for v in 0..2 {
             let jitter = self.history.iter().map(|h| distance(&axes[v].line, &h[v].centre_px).powi(2)).sum::<f64>() / count;
             let turn_jitter = self.history.iter().map(|h| angle_between(&axes[v].line, &h[v].line).powi(2)).sum::<f64>() / count;
+            let stub = axes[v].sections == 0;
             let shift = axes[v].offset_sigma_px.max(jitter.sqrt()).max(0.1);
             let turn = axes[v].angle_sigma_rad.max(turn_jitter.sqrt()).max(1e-4);
             for (dturn, dshift) in [(turn, 0.0), (0.0, shift)] {
-                let moved = perturbed(&axes[v], dturn, dshift);
+                let pivot = if stub { axes[v].tip_px } else { axes[v].centre_px };
+                let moved = perturbed(&axes[v], pivot, dturn, dshift);
                 let lines = if v == 0 { (moved, axes[1].line) } else { (axes[0].line, moved) };
                 if let Ok(other) = self.pointing.indicate(&lines.0, &lines.1) {
                     var += (other.point_m[0] - hit.point_m[0]).powi(2) + (other.point_m[1] - hit.point_m[1]).powi(2);
@@ -223,12 +234,39 @@ impl PointingTracker {
         if sigma_m > self.config.max_sigma_m {
             return GestureState::Uncertain { sigma_m };
         }
+        if let Some((view, behind_px)) = self.behind_a_tip(&axes, hit.point_m, sigma_m) {
+            return GestureState::Disagree { view, behind_px };
+        }
         GestureState::Indicated(PointedAt {
             point_m: hit.point_m,
             sigma_m,
             crossing_rad: hit.crossing_rad,
             axes,
             plane_lines: [plane(&self.pointing.left, &axes[0].line), plane(&self.pointing.right, &axes[1].line)],
+        })
+    }
+
+    /// The first view in which the plane point `point_m` (its image: on that view's line)
+    /// lies behind the fingertip against the finger's direction (tail to tip), by more than
+    /// the point's uncertainty there (`sigma_m` twice, in that view's pixels) and 2 px for
+    /// the tip's own; with how far behind, px.
+    fn behind_a_tip(&self, axes: &[ArmAxis; 2], point_m: [f64; 2], sigma_m: f64) -> Option<(usize, f64)> {
+        let maps = [&self.pointing.left, &self.pointing.right];
+        (0..2).find_map(|v| {
+            let a = &axes[v];
+            let d = Vector2::new(a.tip_px[0] - a.tail_px[0], a.tip_px[1] - a.tail_px[1]);
+            let seen = maps[v].project(&point_m)?;
+            if d.norm() < 1e-9 {
+                return None;
+            }
+            let ahead = (Vector2::from(seen) - Vector2::from(a.tip_px)).dot(&d) / d.norm();
+            let px_per_m = [[sigma_m, 0.0], [0.0, sigma_m]]
+                .iter()
+                .filter_map(|o| maps[v].project(&[point_m[0] + o[0], point_m[1] + o[1]]))
+                .map(|q| (q[0] - seen[0]).hypot(q[1] - seen[1]))
+                .fold(0.0, f64::max);
+            let margin_px = 2.0 + 2.0 * px_per_m;
+            (ahead < -margin_px).then_some((v, -ahead))
         })
     }
 }
@@ -278,11 +316,15 @@ fn mean_axis<'a>(axes: impl Iterator<Item = &'a ArmAxis>) -> ArmAxis {
     out
 }
 
-/// `axis`'s line turned by `turn_rad` about its centre and shifted across by `shift_px`.
-fn perturbed(axis: &ArmAxis, turn_rad: f64, shift_px: f64) -> ImageLine {
+/// `axis`'s line turned by `turn_rad` about `pivot_px` (a point on it) and shifted across by
+/// `shift_px`.
+fn perturbed(axis: &ArmAxis, pivot_px: [f64; 2], turn_rad: f64, shift_px: f64) -> ImageLine {
     let n = Vector2::new(axis.line.0[0], axis.line.0[1]);
+    // The pivot's foot on the line (the tip is on it already; the centre too).
+    let q = Vector2::from(pivot_px);
+    let q = q - n * (n.dot(&q) + axis.line.0[2]);
     let (s, c) = turn_rad.sin_cos();
     let n = Matrix2::new(c, -s, s, c) * n;
-    let p = Vector2::from(axis.centre_px) + n * shift_px;
+    let p = q + n * shift_px;
     ImageLine(Vector3::new(n[0], n[1], -n.dot(&p)))
 }

@@ -111,6 +111,13 @@ const MIN_FINGER_SECTIONS: usize = 15;
 /// than wide, and this long, px (a fingertip seen nearly end-on has no line worth fitting).
 const FINGER_MIN_ELONGATION: f64 = 1.5;
 const FINGER_MIN_LENGTH_PX: f64 = 20.0;
+/// A finger seen nearly end-on is a stub: at least as long as it is wide (shorter, its root
+/// and tip are not apart and it has no direction at all), and this long, px (two minimum
+/// finger widths: the root and the tip at least one width apart).
+const STUB_MIN_ELONGATION: f64 = 1.0;
+const STUB_MIN_LENGTH_PX: f64 = 12.0;
+/// Where a stub's tip is (the mean of its end pixels) is good to about this, px.
+const STUB_TIP_SIGMA_PX: f64 = 1.0;
 
 impl SilhouetteFinder {
     pub fn new(config: SilhouetteConfig) -> Self {
@@ -147,7 +154,10 @@ impl SilhouetteFinder {
         // its sleeve lost against the scene), the finger's alone, as a part of its own.
         let axis = match self.whole_axis(background) {
             Ok(axis) => axis,
-            Err(whole) => self.finger_axis(background, w, h).ok_or(whole)?,
+            Err(whole) => match self.finger_axis(background, w, h) {
+                Some(axis) => axis,
+                None => self.stub_axis(w, h).ok_or(whole)?,
+            },
         };
         Ok(ArmAxis { centroid_px, pixels: n, ..axis })
     }
@@ -184,6 +194,54 @@ impl SilhouetteFinder {
         axis.angle_sigma_rad = axis.angle_sigma_rad.max(0.5 / length);
         axis.offset_sigma_px = axis.offset_sigma_px.max(0.25);
         Some(axis)
+    }
+
+    /// A finger seen nearly end-on: a stub too short for a line of sections, found as the
+    /// silhouette's protrusion with a lower floor on its shape. Its line runs from where it
+    /// joins the hand to its tip, through the tip (what is well located); the root is known
+    /// only to about half the finger's width (it is where the knuckles' outline meets the
+    /// finger's), so the angle's sigma is large and the caller's propagation decides whether
+    /// it matters: it turns the line about the tip, and where a view sees the finger end-on its
+    /// ray through the tip nearly meets the indicated point, which the turn then hardly moves.
+    /// `sections` is 0: the axis has no line of sections, only a tip and a direction.
+    fn stub_axis(&mut self, w: usize, h: usize) -> Option<ArmAxis> {
+        let part = self.finger.find(&self.pixels, w, h, STUB_MIN_ELONGATION, STUB_MIN_LENGTH_PX, &mut self.finger_pixels)?;
+        // Its direction: from the root through its centroid. A stub about as wide as long has
+        // no reliable principal direction, and the extreme along a wrong one is a corner of
+        // its end face, not the tip.
+        let n = self.finger_pixels.len() as f64;
+        let (sx, sy) = self.finger_pixels.iter().fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + f64::from(x), sy + f64::from(y)));
+        let c = [sx / n.max(1.0), sy / n.max(1.0)];
+        let to_c = [c[0] - part.root_px[0], c[1] - part.root_px[1]];
+        let norm = to_c[0].hypot(to_c[1]);
+        if norm < 1e-9 {
+            self.finger_pixels.clear();
+            return None;
+        }
+        let dir = [to_c[0] / norm, to_c[1] / norm];
+        // The tip: the middle of its end face, away from the root.
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
+        let tip = self.extreme_px(c, dir, false);
+        std::mem::swap(&mut self.pixels, &mut self.finger_pixels);
+        let length = (tip[0] - part.root_px[0]).hypot(tip[1] - part.root_px[1]);
+        let line = if length >= 0.5 * STUB_MIN_LENGTH_PX { ImageLine::along(&tip, &dir).ok() } else { None };
+        let Some(line) = line else {
+            self.finger_pixels.clear();
+            return None;
+        };
+        let root_sigma_px = 0.5 * part.width_px;
+        Some(ArmAxis {
+            line,
+            tip_px: tip,
+            tail_px: part.root_px,
+            centre_px: tip,
+            centroid_px: c,
+            end_px: tip,
+            pixels: self.pixels.len(),
+            sections: 0,
+            angle_sigma_rad: (root_sigma_px.hypot(STUB_TIP_SIGMA_PX) / length).atan(),
+            offset_sigma_px: STUB_TIP_SIGMA_PX,
+        })
     }
 
     /// The midline of `pixels` measured in cross-sections across `e` (unit) through `c`, fitted

@@ -267,3 +267,54 @@ fn a_finger_in_front_of_a_scene_edge_keeps_its_sections() {
     let knuckle = [tip[0] + 65.0, tip[1]];
     assert!(off(tip).abs() < 1.5 && off(knuckle).abs() < 1.5, "line {:.2} px off the tip, {:.2} px off the knuckle", off(tip), off(knuckle));
 }
+
+#[test]
+fn a_finger_seen_end_on_in_one_view_still_indicates_its_point() {
+    // The finger points at the target from the right camera's side, along the right camera's
+    // ray through the target: the left view sees the arm as a line; the right view sees a hand
+    // blob with a stub of a finger (20 px wide, 26 px long: not 1.5 times longer than wide),
+    // drawn here turned 25° off any line through the tip, as a stub's direction is unknown.
+    // The right view's ray through the tip meets the plane at the target, so the stub's line,
+    // turned about the tip, hardly moves the point: it is answered, within its sigma.
+    let rig = Rig::standard(1500.0);
+    let bg = [scene(21), scene(22)];
+    let target = Vector3::new(0.5, 0.02, PLANE_Z_M);
+    let back = (rig.right.centre_m - target).normalize();
+    let tip = target + back * 0.12;
+    let elbow = tip + back * 0.45;
+    let (tl, el, tr) = (rig.left.project(&tip), rig.left.project(&elbow), rig.right.project(&tip));
+    let turn = 25f64.to_radians();
+    let u = [turn.sin(), -turn.cos()];
+    let mut tracker = PointingTracker::new(pointing(&rig), GestureConfig::default());
+    let mut rng = SplitMix64::new(8);
+    tracker.set_background(&noisy(&bg[0], &mut rng).view(), &noisy(&bg[1], &mut rng).view());
+    let (left, right) = (with_arm(&bg[0], tl, el), with_parts(&bg[1], tr, u, &[(0.0, 26.0, 10.0), (26.0, 110.0, 45.0)]));
+    let mut last = GestureState::Absent;
+    for _ in 0..12 {
+        last = tracker.update(&noisy(&left, &mut rng).view(), &noisy(&right, &mut rng).view());
+    }
+    let GestureState::Indicated(p) = last else { panic!("{last:?}") };
+    let err = (p.point_m[0] - target.x).hypot(p.point_m[1] - target.y);
+    eprintln!("end-on: {:.2} mm off, sigma {:.2} mm, right angle sigma {:.3} rad, tip {:?} drawn at {tr:?}", err * 1e3, p.sigma_m * 1e3, p.axes[1].angle_sigma_rad, p.axes[1].tip_px);
+    assert_eq!(p.axes[1].sections, 0, "the right view's line is the stub's");
+    assert!(p.axes[1].angle_sigma_rad > 0.2, "a stub's angle is not known better than its root: {}", p.axes[1].angle_sigma_rad);
+    assert!(p.sigma_m < 0.008 && err < 2.0 * p.sigma_m + 0.0005, "{err} m off at sigma {} m", p.sigma_m);
+}
+
+#[test]
+fn views_whose_fingers_point_apart_are_refused_as_disagreeing() {
+    // The same image line in both views as a finger pointing at the target, but in the right
+    // view the narrow end (the fingertip) is at the other end: the lines meet at the target,
+    // which lies behind the right view's fingertip. No finger points there; refused.
+    let rig = Rig::standard(1500.0);
+    let target = Vector3::new(0.5, 0.02, PLANE_Z_M);
+    let mut a = arm(&rig, target, 60.0, 50.0, 0.1);
+    let mut tracker = PointingTracker::new(pointing(&rig), GestureConfig::default());
+    assert!(matches!(run(&mut tracker, &[scene(23), scene(24)], |_| a, 12, 6), GestureState::Indicated(_)));
+    a[1] = [a[1][1], a[1][0]];
+    let mut tracker = PointingTracker::new(pointing(&rig), GestureConfig::default());
+    match run(&mut tracker, &[scene(23), scene(24)], |_| a, 12, 6) {
+        GestureState::Disagree { view, behind_px } => assert!(view == 1 && behind_px > 50.0, "view {view}, {behind_px} px behind"),
+        other => panic!("{other:?}"),
+    }
+}
