@@ -213,11 +213,10 @@ impl PointingTracker {
         for v in 0..2 {
             let jitter = self.history.iter().map(|h| distance(&axes[v].line, &h[v].centre_px).powi(2)).sum::<f64>() / count;
             let turn_jitter = self.history.iter().map(|h| angle_between(&axes[v].line, &h[v].line).powi(2)).sum::<f64>() / count;
-            let stub = axes[v].sections == 0;
+            let pivot = if axes[v].sections == 0 { axes[v].tip_px } else { axes[v].centre_px };
             let shift = axes[v].offset_sigma_px.max(jitter.sqrt()).max(0.1);
             let turn = axes[v].angle_sigma_rad.max(turn_jitter.sqrt()).max(1e-4);
             for (dturn, dshift) in [(turn, 0.0), (0.0, shift)] {
-                let pivot = if stub { axes[v].tip_px } else { axes[v].centre_px };
                 let moved = perturbed(&axes[v], pivot, dturn, dshift);
                 let lines = if v == 0 { (moved, axes[1].line) } else { (axes[0].line, moved) };
                 if let Ok(other) = self.pointing.indicate(&lines.0, &lines.1) {
@@ -254,12 +253,9 @@ impl PointingTracker {
         let maps = [&self.pointing.left, &self.pointing.right];
         (0..2).find_map(|v| {
             let a = &axes[v];
-            let d = Vector2::new(a.tip_px[0] - a.tail_px[0], a.tip_px[1] - a.tail_px[1]);
+            let d = Vector2::new(a.tip_px[0] - a.tail_px[0], a.tip_px[1] - a.tail_px[1]).try_normalize(1e-9)?;
             let seen = maps[v].project(&point_m)?;
-            if d.norm() < 1e-9 {
-                return None;
-            }
-            let ahead = (Vector2::from(seen) - Vector2::from(a.tip_px)).dot(&d) / d.norm();
+            let ahead = (Vector2::from(seen) - Vector2::from(a.tip_px)).dot(&d);
             let px_per_m = [[sigma_m, 0.0], [0.0, sigma_m]]
                 .iter()
                 .filter_map(|o| maps[v].project(&[point_m[0] + o[0], point_m[1] + o[1]]))
