@@ -181,13 +181,14 @@ fn gesture_seed(scenario_seed: u64, k: u64) -> u64 {
 /// not react to a gesture (`[pointer] repeats`). Watches the arm only (where the tool is),
 /// as a person would; never the daemon's telemetry.
 ///
-/// A reaction is the arm *staying* somewhere else than where it stood when the hand went
+/// A reaction is the arm *staying* somewhere else than where it stood while the hand held
 /// (it went for the block, or back to work): a person waits while the arm moves, and when it
 /// has come back to where it waited and stands there (the robot busied itself with
 /// something else: a hold for a lost view, the cage visited again) and still does nothing
 /// for `repeat_after_s`, points again. Only the tool's distance from that place counts, so
 /// the parked arm's settling and a hold's stop (well under a millimetre) never read as a
-/// reaction.
+/// reaction. Where it stood is taken as the hand begins to go, not once it has gone: a daemon
+/// that sees the hand leave its views may move the arm while the hand is still withdrawing.
 #[derive(Debug, Clone)]
 pub struct PointerOperator {
     cfg: PointerConfig,
@@ -227,13 +228,16 @@ impl PointerOperator {
     /// At `now_ns`, with the tool at `tool_m`: the next gesture when it is time for one
     /// (the caller makes it the current one; the old one goes to [`Self::earlier`]).
     pub fn watch(&mut self, now_ns: u64, current: &PointerGesture, tool_m: DVec3) -> Option<PointerGesture> {
+        // Where the arm stood while the hand held: taken as the hand begins to go (the daemon
+        // does not move it before the hand goes, but may before it has quite gone).
+        if now_ns >= current.times_ns[2] && self.tool_at_end.is_none() {
+            tracing::info!(gesture = self.made, t_s = now_ns as f64 * 1e-9, tool_m = ?tool_m.to_array(), "operator: the hand goes; watching the arm");
+            self.tool_at_end = Some(tool_m);
+        }
         if now_ns < current.end_ns() {
             return None;
         }
-        let at_end = *self.tool_at_end.get_or_insert_with(|| {
-            tracing::info!(gesture = self.made, t_s = now_ns as f64 * 1e-9, tool_m = ?tool_m.to_array(), "operator: the hand has gone; watching the arm");
-            tool_m
-        });
+        let at_end = *self.tool_at_end.get_or_insert(tool_m);
         let moved_m = (tool_m - at_end).length();
         if moved_m > REACTED_M {
             if self.away_ns.is_none() {
@@ -362,6 +366,16 @@ mod tests {
         assert_eq!(op.watch(end + s(9.0), &first, parked), None, "just back");
         let again = op.watch(end + s(13.0), &first, parked).expect("back where it waited and still: no reaction after all");
         assert!(again.azimuth_deg != first.azimuth_deg);
+        // The daemon sees the hand leave its views and moves the arm while the hand is still
+        // withdrawing; the arm comes back to where it stood while the hand held: no reaction.
+        let mut op = PointerOperator::of_scenario(&scenario).unwrap();
+        let withdrawing = first.times_ns[2];
+        assert_eq!(op.watch(withdrawing, &first, parked), None);
+        assert_eq!(op.watch(end - s(0.2), &first, parked + DVec3::new(0.03, 0.0, 0.01)), None);
+        assert_eq!(op.watch(end, &first, parked + DVec3::new(0.05, 0.0, 0.02)), None, "moving");
+        assert_eq!(op.watch(end + s(3.0), &first, parked + DVec3::new(0.05, 0.0, 0.02)), None, "away");
+        assert_eq!(op.watch(end + s(5.0), &first, parked), None, "just back");
+        assert!(op.watch(end + s(9.5), &first, parked).is_some(), "back where it stood while the hand held: point again");
     }
 
     #[test]
