@@ -33,7 +33,7 @@ fn the_daemon_sees_where_the_hand_points_and_lifts_that_block() {
     let gestures = r.daemon["pointing"]["gestures"].as_array().expect("pointing.gestures");
     let answer = gestures.last().expect("a gesture");
     assert_eq!(answer["outcome"], "indicated", "{why}");
-    assert!(answer["sigma_mm"].as_f64().is_some_and(|s| s > 0.0 && s <= 8.0), "{answer}");
+    assert!(answer["sigma_mm"].as_f64().is_some_and(|s| s > 0.0 && s <= 15.0), "{answer}");
     assert!(r.daemon["pointing"]["update_us_p50"].as_f64().is_some_and(|us| us > 0.0), "{why}");
     assert!(r.daemon["pointing"]["updates"].as_u64().is_some_and(|n| n >= 30), "{why}");
     // The block it went for is the one pointed at, and it lifted it.
@@ -44,4 +44,33 @@ fn the_daemon_sees_where_the_hand_points_and_lifts_that_block() {
     assert!(r.f("max_lift_mm") >= 50.0, "{why}");
     // The plate stayed tracked throughout and the arm never moved on a lost track.
     assert_eq!(r.sim.daemon.moves_on_lost_track, 0, "{why}");
+}
+
+/// A point that does not pick one block is not acted on: the operator is asked to point
+/// again. With `plan.point_ambiguity_sigmas` so large that no pointed point picks one, the
+/// answered gesture is recorded `ambiguous`, the daemon goes from the plan back to the point
+/// phase (the arm back where the operator saw it wait, so the operator points again), watches
+/// the next gesture, and never goes for a block.
+#[test]
+fn a_point_that_picks_no_one_block_asks_the_operator_to_point_again() {
+    let dir = e2e_support::TempDir::new("point_ambiguous_config");
+    let config = dir.0.join("daemon.toml");
+    std::fs::write(&config, "[plan]\npoint_ambiguity_sigmas = 1000.0\n").unwrap();
+    let r = e2e_support::run("point_clutter3.toml", &["--config", config.to_str().unwrap()]);
+    let why = r.explain();
+    let phases: Vec<&str> = r.sim.daemon.phases.iter().map(|(p, _)| p.as_str()).collect();
+    assert!(phases.contains(&Phase::Plan.name()), "phases {phases:?}: {why}");
+    assert!(!phases.contains(&Phase::AcquireTarget.name()), "phases {phases:?}: it went for a block: {why}");
+    let gestures = r.daemon["pointing"]["gestures"].as_array().unwrap_or_else(|| panic!("daemon.json pointing.gestures: {why}"));
+    let ambiguous = &gestures[0];
+    assert_eq!(ambiguous["outcome"], "ambiguous", "the first gesture: {gestures:?}");
+    assert!(ambiguous["detail"].as_str().is_some_and(|d| d.contains("does not pick one block")), "{ambiguous}");
+    assert!(ambiguous["point_m"].is_array() && ambiguous["sigma_mm"].as_f64().is_some_and(|s| s > 0.0), "the answer's numbers stay: {ambiguous}");
+    // After the plan the daemon watched again, and the operator, seeing the arm back where it
+    // waited, pointed again: a later gesture is on the record (answered or refused).
+    assert!(gestures.len() >= 2, "no gesture after the plan asked again: {gestures:?}: {why}");
+    assert_eq!(r.summary["success"], false, "{why}");
+    // No ambiguous point stands: none is left `indicated`, and none is the daemon's point.
+    assert!(gestures.iter().all(|g| g["outcome"] != "indicated"), "{gestures:?}");
+    assert!(r.daemon["pointing"]["indicated_m"].is_null(), "{why}");
 }

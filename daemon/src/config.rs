@@ -274,7 +274,9 @@ pub struct PointSettings {
     /// Frames the arm must be still before the scene without the hand is taken.
     pub settle_frames: u32,
     /// Largest one-sigma radius of an indicated point that is answered, m (a less certain
-    /// one is refused as uncertain, and the daemon waits for the next gesture).
+    /// one is refused as uncertain, and the daemon waits for the next gesture). An answered
+    /// point must also pick one block: the plan asks the operator to point again when a
+    /// site on another block is within the point's uncertainty (`planning::point_ambiguity`).
     pub max_sigma_m: f64,
     /// Time-out of the whole phase (park, settle, the gestures), s of camera time: the
     /// failure names every gesture seen and why it was refused.
@@ -283,7 +285,7 @@ pub struct PointSettings {
 
 impl Default for PointSettings {
     fn default() -> Self {
-        Self { park_m: vec![0.18, 0.0, 0.14], settle_frames: 5, max_sigma_m: 0.008, timeout_s: 90.0 }
+        Self { park_m: vec![0.18, 0.0, 0.14], settle_frames: 5, max_sigma_m: 0.015, timeout_s: 90.0 }
     }
 }
 
@@ -377,6 +379,11 @@ pub struct PlanGraspRules {
     /// centre), or the block the operator meant has no grasp site and the plan fails (rather
     /// than grasp another block), m.
     pub max_site_distance_m: f64,
+    /// A *pointed* point picks the block of the nearest site only if the nearest site on
+    /// another object is farther by twice this many of the point's sigmas (the point may be
+    /// this many sigmas off: it has missed by up to three on rendered gestures); else the
+    /// operator is asked to point again. A point given as a coordinate is never questioned.
+    pub point_ambiguity_sigmas: f64,
 }
 
 impl Default for PlanGraspRules {
@@ -388,6 +395,7 @@ impl Default for PlanGraspRules {
             object_tolerance_m: 0.008,
             max_view_angle_deg: 60.0,
             max_site_distance_m: 0.06,
+            point_ambiguity_sigmas: 3.0,
         }
     }
 }
@@ -738,6 +746,7 @@ impl DaemonConfig {
             ("plan.max_view_angle_deg", self.plan.grasp.max_view_angle_deg),
             ("plan.parallel_tolerance_deg", self.plan.grasp.parallel_tolerance_deg),
             ("plan.max_site_distance_m", self.plan.grasp.max_site_distance_m),
+            ("plan.point_ambiguity_sigmas", self.plan.grasp.point_ambiguity_sigmas),
             ("servo.max_step_m", self.servo.limits.max_step_m),
             ("servo.speed_mps", self.servo.speed_mps),
             ("servo.timeout_s", self.servo.convergence.timeout_s),
@@ -981,6 +990,7 @@ mod tests {
             "plan.rear_edges_from_image",
             "plan.join_m",
             "plan.max_site_distance_m",
+            "plan.point_ambiguity_sigmas",
             "plan.timeout_s",
             "point.park_m",
             "point.settle_frames",

@@ -16,7 +16,9 @@ pub struct GestureRecord {
     pub frame_id: u64,
     /// Camera time of the cycle that took it, s since the daemon's first frame.
     pub time_s: f64,
-    /// `indicated`, `degenerate`, `uncertain`, `disagree`, `unsteady` or `no_line`.
+    /// `indicated`, `degenerate`, `uncertain`, `disagree`, `unsteady` or `no_line`; or
+    /// `ambiguous`: answered, but the plan found that the point picks no one block (the
+    /// operator was asked to point again).
     pub outcome: String,
     /// The indicated point, robot frame, m (`indicated` only).
     pub point_m: Option<[f64; 3]>,
@@ -155,6 +157,16 @@ impl PointingRecord {
             self.indicated_m = g.point_m;
         }
         self.gestures.push(g);
+    }
+
+    /// The plan found that the answered gesture's point picks no one block (`why`): it is
+    /// recorded as `ambiguous`, and the point is forgotten until the next answer.
+    pub fn ambiguous(&mut self, why: String) {
+        if let Some(g) = self.gestures.iter_mut().rev().find(|g| g.outcome == "indicated") {
+            g.outcome = "ambiguous".into();
+            g.detail = why;
+        }
+        self.indicated_m = None;
     }
 
     pub fn gestures(&self) -> &[GestureRecord] {

@@ -58,6 +58,11 @@ pub struct Targeting {
     target: Option<TargetSpec>,
     /// The operator's indicated point on the working plane, robot frame, m.
     indicated_m: Option<[f64; 3]>,
+    /// The indicated point's one-sigma radius, m: 0 for a point given as a coordinate, the
+    /// gesture's for a pointed one (the plan checks that it picks one block).
+    indicated_sigma_m: f64,
+    /// Times the operator was asked to point again because the point did not pick one block.
+    repoints: u32,
     /// The plan's other grasp sites near the indicated point, next best first: tried in turn
     /// when the target trackers cannot hold the chosen facet or it turns out not vertical.
     alternatives: Vec<TargetSpec>,
@@ -132,8 +137,41 @@ impl Targeting {
         self.indicated_m
     }
 
+    /// A point given as a coordinate (`--point`, a re-plan's moved point keeps its sigma).
     pub fn set_indicated_m(&mut self, point_m: Option<[f64; 3]>) {
         self.indicated_m = point_m;
+        if point_m.is_none() {
+            self.indicated_sigma_m = 0.0;
+        }
+    }
+
+    /// A point the operator pointed at, with its one-sigma radius, m.
+    pub fn set_pointed_m(&mut self, point_m: [f64; 3], sigma_m: f64) {
+        self.indicated_m = Some(point_m);
+        self.indicated_sigma_m = sigma_m.max(0.0);
+    }
+
+    pub fn indicated_sigma_m(&self) -> f64 {
+        self.indicated_sigma_m
+    }
+
+    /// Forgets a pointed point that did not pick one block, so that the operator is asked
+    /// again; `false` (nothing forgotten) after `max` such times, or for a point that was not
+    /// pointed.
+    pub fn point_again(&mut self, max: u32) -> bool {
+        if self.indicated_sigma_m <= 0.0 || self.repoints >= max {
+            return false;
+        }
+        self.repoints += 1;
+        self.indicated_m = None;
+        self.indicated_sigma_m = 0.0;
+        self.target = None;
+        self.alternatives.clear();
+        true
+    }
+
+    pub fn repoints(&self) -> u32 {
+        self.repoints
     }
 
     /// The target's trackers converged on it here (frame origins, left u, v, right u, v).
@@ -177,5 +215,36 @@ impl Targeting {
 
     pub fn attempts(&self) -> u32 {
         self.attempts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_pointed_point_is_forgotten_to_point_again_and_only_so_often() {
+        let mut t = Targeting::default();
+        // A point given as a coordinate is the operator's word: never asked again.
+        t.set_indicated_m(Some([0.3, 0.0, 0.06]));
+        assert!(!t.point_again(2) && t.indicated_m().is_some());
+        t.set_pointed_m([0.3, 0.01, 0.06], 0.012);
+        assert_eq!(t.indicated_sigma_m(), 0.012);
+        t.set_alternatives(vec![TargetSpec {
+            source: TargetSource::Plan,
+            left_px: vec![],
+            right_px: vec![],
+            depth_m: 0.03,
+            site_px: None,
+            site_template: None,
+            grasp_tool_z_m: None,
+        }]);
+        assert!(t.point_again(2));
+        assert!(t.indicated_m().is_none() && t.target().is_none() && t.alternatives_left() == 0 && t.indicated_sigma_m() == 0.0);
+        t.set_pointed_m([0.3, 0.01, 0.06], 0.012);
+        assert!(t.point_again(2) && t.repoints() == 2);
+        t.set_pointed_m([0.3, 0.01, 0.06], 0.012);
+        assert!(!t.point_again(2), "the third ambiguous point ends the run");
+        assert_eq!(t.indicated_m(), Some([0.3, 0.01, 0.06]));
     }
 }

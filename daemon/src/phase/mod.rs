@@ -169,6 +169,8 @@ impl PhaseState {
                 // Without an indicated point the operator is asked to point.
                 Self::Calibrate(_) if m.targeting.indicated_m().is_none() => Self::Point(point::PointPhase::new(c.time_ns)),
                 Self::Calibrate(_) | Self::Point(_) => Self::Plan(plan::PlanPhase::new(c.time_ns)),
+                // A pointed point that picked no one block was forgotten: point again.
+                Self::Plan(_) if m.targeting.target().is_none() && m.targeting.indicated_m().is_none() => Self::Point(point::PointPhase::new(c.time_ns)),
                 Self::Plan(_) => Self::AcquireTarget(acquire_target::AcquireTarget::new(c.time_ns)),
                 Self::AcquireTarget(_) => match servo::ServoPhase::new(m, c) {
                     Ok(p) => Self::Servo(Box::new(p)),

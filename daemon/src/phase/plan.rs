@@ -23,6 +23,10 @@ use crate::gripper::tool_from_reference;
 use crate::mission::{Mission, PlanningStats, TargetSource, TargetSpec};
 use crate::planning::{plan_request, PlanCalibration, PlanMoment, PlanOutput, PlannedTarget};
 
+/// Times a pointed point that picks no one block sends the operator back to point before the
+/// run fails: each answer is a new gesture from wherever the operator stands.
+pub const MAX_REPOINTS: u32 = 2;
+
 enum Stage {
     /// Going to the park pose (if not there).
     Park { wait: Option<MoveWait> },
@@ -178,6 +182,7 @@ impl PlanPhase {
                     },
                     masks,
                     indicated_m: m.targeting.indicated_m(),
+                    indicated_sigma_m: m.targeting.indicated_sigma_m(),
                     max_height_m: f64::from(c.robot.tool_pos_m[2]) - m.cfg.plan.scene.arm_clearance_m,
                 };
                 let request = plan_request(&m.cfg, moment);
@@ -205,10 +210,22 @@ impl PlanPhase {
                 let target = out.target.clone();
                 let refusal = out.refusal.clone();
                 let unjudged = out.unjudged.clone();
+                let ambiguous = out.ambiguous.clone();
                 m.targeting.set_alternatives(out.alternatives.iter().map(target_spec).collect());
                 m.planning.record(summary.clone(), stats);
                 m.reporting.plan(out);
                 let Some(t) = target else {
+                    // A pointed point between blocks: the operator is asked to point again
+                    // (the dispatcher goes back to the point phase when the point is gone).
+                    if let Some(why) = ambiguous {
+                        m.pointing.ambiguous(why.clone());
+                        if m.targeting.point_again(MAX_REPOINTS) {
+                            tracing::warn!(%why, "plan: asking the operator to point again");
+                            m.reporting.set_status("plan: the point does not pick one block; point again");
+                            return Step::Next(Cmd::HOLD);
+                        }
+                        return Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()));
+                    }
                     // A refusal names the rules the pointed block fails, from this plan's own
                     // facets, so that the user can tell a right refusal from a blind one.
                     if let Some(why) = refusal {

@@ -223,8 +223,9 @@ impl PointPhase {
                             g.detail = format!("{} (after {}: {} while the hand settled)", g.detail, first.outcome, first.detail);
                         }
                         tracing::info!(outcome = %g.outcome, detail = %g.detail, frame = g.frame_id, "pointing gesture");
+                        let sigma_m = g.sigma_mm.map_or(0.0, |s| s * 1e-3);
                         m.pointing.gesture(g);
-                        m.targeting.set_indicated_m(Some(p));
+                        m.targeting.set_pointed_m(p, sigma_m);
                         m.reporting.set_status("point: indicated; waiting for the hand to go");
                         m.reporting.snapshot("pointed");
                         self.stage = Stage::Withdraw { since_ns: time_ns, gone: false };

@@ -90,6 +90,11 @@ pub struct PlanCalibration {
 pub struct SceneLimits {
     /// The operator's indicated point, robot frame, m.
     pub indicated_m: Option<[f64; 3]>,
+    /// Its one-sigma radius, m: 0 for a point given as a coordinate; a pointed point with a
+    /// radius must pick one block (see [`point_ambiguity`]).
+    pub indicated_sigma_m: f64,
+    /// How many sigmas off a pointed point may be (`plan.point_ambiguity_sigmas`).
+    pub ambiguity_sigmas: f64,
     /// Features entirely above this height are the arm, m.
     pub max_height_m: f64,
     /// Features closer than this in 3-D are one object, m.
@@ -227,6 +232,10 @@ pub struct SiteRecord {
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct PlanInputs {
     pub indicated_m: Option<[f64; 3]>,
+    /// Its one-sigma radius, m: present for a pointed point (absent: given as a coordinate,
+    /// or a report written before it was kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub indicated_sigma_m: Option<f64>,
     /// The indicated point in both views, tracker pixels.
     pub indicated_px: Option<[[f64; 2]; 2]>,
     /// The gripper's masked region in both views, tracker pixels.
@@ -288,6 +297,31 @@ pub struct PlanOutput {
     /// fingers hitting only its own other faces as reconstructed), in words. Not a refusal:
     /// the judge on true geometry may well find a grasp.
     pub unjudged: Option<String>,
+    /// With no target: the pointed point does not pick one block (another block's site is
+    /// nearly as near, within the point's uncertainty), in words. The operator is asked to
+    /// point again; nothing was refused.
+    pub ambiguous: Option<String>,
+}
+
+/// Why a pointed point with one-sigma radius `sigma_m` does not pick the block of the chosen
+/// site, `chosen_m` from it (plan view, m), given the distances of the sites on other
+/// objects; `None`: it picks one (always for a point given as a coordinate, `sigma_m` 0).
+/// The point may be `sigmas` sigmas off, `r`; moving it by `r` changes each distance by at
+/// most `r`, so the nearest other site must be `2 r` farther for no such point to prefer it.
+/// Three sigmas by default, not one: on rendered gestures the point has missed by up to three
+/// times its sigma where a finger's line was biased (BENCHMARKS.md, Pointing).
+pub fn point_ambiguity(chosen_m: f64, others_m: impl Iterator<Item = f64>, sigma_m: f64, sigmas: f64) -> Option<String> {
+    let other_m = others_m.fold(f64::INFINITY, f64::min);
+    let margin_m = other_m - chosen_m;
+    (sigma_m > 0.0 && margin_m < 2.0 * sigmas * sigma_m).then(|| {
+        format!(
+            "the point does not pick one block: a site on another is only {:.0} mm farther ({:.0} against {:.0} mm) and the point's sigma is {:.1} mm",
+            margin_m * 1e3,
+            other_m * 1e3,
+            chosen_m * 1e3,
+            sigma_m * 1e3
+        )
+    })
 }
 
 /// A short name for a rejection reason.
@@ -491,6 +525,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     let mut summary = PlanSummary {
         inputs: PlanInputs {
             indicated_m: req.scene.indicated_m,
+            indicated_sigma_m: (req.scene.indicated_sigma_m > 0.0).then_some(req.scene.indicated_sigma_m),
             indicated_px: req.scene.indicated_m.map(|p| project(&req.calibration.model, &req.calibration.lever_m, &Vector3::from(p))),
             masks_px: req.masks.clone(),
             cage_robot_m: req.calibration.cage_robot_m.iter().map(arr3).collect(),
@@ -673,7 +708,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
         Err(e) => {
             summary.sites.rejected_by_reason.insert(format!("invalid scene: {e}"), 1);
             summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None, unjudged: None };
+            return PlanOutput { summary, target: None, alternatives: Vec::new(), images: req.images, refusal: None, unjudged: None, ambiguous: None };
         }
     };
     // No site near the point, or only zero-width ones (the thesis's thin wall; among
@@ -743,7 +778,19 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     summary.sites.candidates = grasps.candidates.iter().map(|g| site_summary(Some(g), &g.site, None)).collect();
     // The block nearest the point has no grasp site if the nearest site is far from it.
     let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.scene.max_distance_m);
-    let chosen = grasps.chosen.filter(near);
+    let mut chosen = grasps.chosen.filter(near);
+    // A pointed point must pick one block: the nearest site on another object must be
+    // farther by more than the point's uncertainty can change (`point_ambiguity`).
+    let ambiguous = chosen.as_ref().zip(indicated.as_ref()).and_then(|(g, p)| {
+        let object = |g: &Grasp| ps.scene.facets.get(g.site.facet).map(|f| f.component);
+        let distance = |g: &Grasp| (g.site.centre_m.xy() - p.xy()).norm();
+        let others = grasps.candidates.iter().filter(|c| object(c) != object(g)).map(distance);
+        point_ambiguity(distance(g), others, req.scene.indicated_sigma_m, req.scene.ambiguity_sigmas)
+    });
+    if ambiguous.is_some() {
+        summary.sites.rejected_by_reason.insert("ambiguous_point".into(), grasps.candidates.len());
+        chosen = None;
+    }
     if grasps.chosen.is_some() && chosen.is_none() {
         summary.sites.rejected_by_reason.insert("far_from_indicated_point".into(), grasps.candidates.len());
     }
@@ -764,14 +811,14 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     };
     let target = chosen.as_ref().map(planned);
     let alternatives: Vec<PlannedTarget> = if chosen.is_some() { grasps.candidates.iter().skip(1).filter(|g| near(g)).map(planned).collect() } else { Vec::new() };
-    let verdict = if target.is_none() { pointed_block_verdict(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
+    let verdict = if target.is_none() && ambiguous.is_none() { pointed_block_verdict(&ps, &grasps.rejected, indicated.as_ref(), &req.grasp, req.scene.max_distance_m) } else { None };
     let (refusal, unjudged) = match verdict {
         Some(PointedBlock::Refused(why)) => (Some(why), None),
         Some(PointedBlock::Unjudged(why)) => (None, Some(why)),
         None => (None, None),
     };
     summary.timing.total_ms = start.elapsed().as_secs_f64() * 1e3;
-    PlanOutput { summary, target, alternatives, images: req.images, refusal, unjudged }
+    PlanOutput { summary, target, alternatives, images: req.images, refusal, unjudged, ambiguous }
 }
 
 /// How far an edge detector's segment end may lie off the true edge across it, pixels: the
@@ -843,6 +890,19 @@ fn pointed_block_verdict(ps: &PlannedScene, rejected: &[Rejection], indicated: O
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pointed_point_picks_a_block_only_with_a_margin_of_its_uncertainty() {
+        // The chosen site 20 mm from the point, another object's 60 mm: a 40 mm margin.
+        let others = || [60e-3, 95e-3].into_iter();
+        assert_eq!(point_ambiguity(20e-3, others(), 0.0, 3.0), None, "a given point is never ambiguous");
+        assert_eq!(point_ambiguity(20e-3, others(), 6e-3, 3.0), None, "40 mm > 6 sigma of 6 mm");
+        assert_eq!(point_ambiguity(20e-3, others(), 9e-3, 2.0), None, "40 mm > 4 sigma of 9 mm");
+        let why = point_ambiguity(20e-3, others(), 7e-3, 3.0).expect("40 mm < 6 sigma of 7 mm");
+        assert!(why.contains("only 40 mm farther (60 against 20 mm)") && why.contains("7.0 mm"), "{why}");
+        // No site on another object: nothing to confuse it with.
+        assert_eq!(point_ambiguity(20e-3, std::iter::empty(), 50e-3, 3.0), None);
+    }
 
     #[test]
     fn a_points_height_error_is_the_pixel_error_over_the_pixels_a_height_moves_it() {

@@ -28,6 +28,8 @@ pub struct PlanMoment {
     /// The gripper's image region in each view, tracker pixels.
     pub masks: [Vec<[f64; 2]>; 2],
     pub indicated_m: Option<[f64; 3]>,
+    /// Its one-sigma radius, m (0: given as a coordinate).
+    pub indicated_sigma_m: f64,
     /// Features entirely above this height are the arm, m.
     pub max_height_m: f64,
 }
@@ -57,6 +59,8 @@ pub fn plan_request(cfg: &DaemonConfig, moment: PlanMoment) -> PlanRequest {
         mask_margin_px: p.mask.mask_margin_px,
         scene: SceneLimits {
             indicated_m: moment.indicated_m,
+            indicated_sigma_m: moment.indicated_sigma_m,
+            ambiguity_sigmas: p.grasp.point_ambiguity_sigmas,
             max_height_m: moment.max_height_m,
             max_distance_m: p.grasp.max_site_distance_m,
             join_m: p.scene.join_m,
@@ -98,6 +102,7 @@ pub fn replay_request(cfg: &DaemonConfig, summary: &PlanSummary, images: [ImageB
         },
         masks: inputs.masks_px.clone(),
         indicated_m: inputs.indicated_m,
+        indicated_sigma_m: inputs.indicated_sigma_m.unwrap_or(0.0),
         max_height_m,
     };
     Ok(plan_request(cfg, moment))

@@ -31,13 +31,17 @@ pub struct GestureConfig {
     /// background.
     pub quiet_pixels: usize,
     /// A point less certain than this (one-sigma radius, metres) is reported as uncertain,
-    /// not as the answer: a finger line measured on too little of the arm.
+    /// not as the answer: a finger line measured on too little of the arm. 15 mm: a point
+    /// picks a block (the blocks a gripper takes are 30-60 mm across), and whether it picks
+    /// one is the plan's to judge against the blocks it sees (`handeye-daemon`'s
+    /// `point_ambiguity`); beyond 15 mm its 3-sigma circle would cover the 60 mm the plan
+    /// looks for a site in. 8 mm refused gestures that pick their block (BENCHMARKS.md).
     pub max_sigma_m: f64,
 }
 
 impl Default for GestureConfig {
     fn default() -> Self {
-        Self { silhouette: SilhouetteConfig::default(), steady_frames: 10, steady_px: 1.5, unsteady_after_frames: 90, quiet_pixels: 30, max_sigma_m: 0.008 }
+        Self { silhouette: SilhouetteConfig::default(), steady_frames: 10, steady_px: 1.5, unsteady_after_frames: 90, quiet_pixels: 30, max_sigma_m: 0.015 }
     }
 }
 
