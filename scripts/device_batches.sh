@@ -3,7 +3,8 @@
 # Here: strip a `cargo build --release --no-default-features --bin handeye` into devbin/handeye,
 # copy this script to devbin/run.sh, download the Vulkan loader debs into .gl (device README), and
 # ignore both in .git/info/exclude. There: BATCHES="rand50 clutter30" JOBS=12 bash devbin/run.sh check
-# (modes: check = snapshot + bench render, none); TRACK=1 also times devbin/tracker_profile_{base,new}.
+# (modes: check = snapshot + bench render, none); TRACK=1 also times devbin/tracker_profile_{base,new};
+# FIRST=31 starts the point30/given30 batches at seed 31 (unseen seeds).
 set -u
 MODE=${1:-check}
 for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
@@ -15,7 +16,7 @@ if ! ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1;
   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
   echo "VK_DRIVER_FILES set"
 fi
-B=devbin/handeye; chmod +x $B
+B=${BIN:-devbin/handeye}; chmod +x $B
 J=${JOBS:-12}
 t0=$(date +%s)
 if [ "$MODE" = check ]; then
@@ -27,8 +28,8 @@ for b in ${BATCHES:-}; do
   case $b in
     rand50) args="--randomize --seeds 50";;
     clutter30) args="scenarios/clutter3.toml --seeds 30";;
-    point30) args="scenarios/point_clutter3.toml --seeds 30";;
-    given30) args="scenarios/point_clutter3.toml --seeds 30 --given-point";;
+    point30) args="scenarios/point_clutter3.toml --seeds 30 --first-seed ${FIRST:-1}";;
+    given30) args="scenarios/point_clutter3.toml --seeds 30 --first-seed ${FIRST:-1} --given-point";;
     c100) args="scenarios/clutter3.toml --seeds 30 --first-seed 100";;
     disturb30) args="scenarios/clutter3.toml --seeds 30 --disturb";;
   esac
