@@ -149,6 +149,30 @@ fn every_gesture_of_the_seeds() {
             }
             write(format!("s{seed}g{k}-finger.pgm"), &marked);
             let aim = gesture.aim_m;
+            // The mid-hold frame alone: how far each view's line passes from the truth's tip
+            // and aim (a line through the tip that misses the aim is turned: a direction bias),
+            // and how far the point the two lines give is from the aim.
+            let single = [finder.find(&bl, &l), finder.find(&br, &r)];
+            for (v, a) in single.iter().enumerate() {
+                if let Ok(a) = a {
+                    let d = |q: [f64; 2]| a.line.0[0] * q[0] + a.line.0[1] * q[1] + a.line.0[2];
+                    eprintln!(
+                        "  mid-hold {}: aim {:.1} px, tip {:.1} px off the line ({} sections)",
+                        ["left", "right"][v],
+                        d(tr.views[v].aim_px),
+                        d(tr.views[v].tip_px),
+                        a.sections
+                    );
+                }
+            }
+            if let [Ok(a), Ok(b)] = &single {
+                if let Ok(hit) = tracker.pointing.indicate(&a.line, &b.line) {
+                    eprintln!(
+                        "  mid-hold point {:.1} mm off the aim",
+                        (hit.point_m[0] - aim.x).hypot(hit.point_m[1] - aim.y) * 1e3
+                    );
+                }
+            }
             match state {
                 GestureState::Indicated(p) => {
                     tally.0 += 1;
