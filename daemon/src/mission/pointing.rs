@@ -81,9 +81,9 @@ pub struct PointingRecord {
 /// State changes kept for `daemon.json`.
 const MAX_CHANGES: usize = 200;
 
-/// A gesture state's name, as telemetry's `pointing_state` names it.
-fn state_name(s: &GestureState) -> &'static str {
-    let p = match s {
+/// A gesture state as telemetry's `pointing_state` carries it.
+fn wire_state(s: &GestureState) -> PointingState {
+    match s {
         GestureState::Absent => PointingState::Absent,
         GestureState::Moving { .. } => PointingState::Moving,
         GestureState::Indicated(_) => PointingState::Indicated,
@@ -92,8 +92,7 @@ fn state_name(s: &GestureState) -> &'static str {
         GestureState::Unsteady { .. } => PointingState::Unsteady,
         GestureState::NoLine { .. } => PointingState::NoLine,
         GestureState::Disagree { .. } => PointingState::Disagree,
-    };
-    p.name()
+    }
 }
 
 impl Default for PointingRecord {
@@ -129,7 +128,7 @@ impl PointingRecord {
     /// A result taken this cycle.
     pub fn result(&mut self, r: &GestureResult) {
         self.update.record_ns(r.update_ns.max(1));
-        let name = state_name(&r.state);
+        let name = wire_state(&r.state).name();
         if self.changes.len() < MAX_CHANGES && self.changes.last().is_none_or(|(_, last)| last != name) {
             self.changes.push((r.frame_id, name.to_string()));
         }
@@ -219,9 +218,8 @@ impl PointingRecord {
         };
         t.pointing_frame = r.frame_id as u32;
         let f = |x: f64| x as f32;
-        t.pointing_state = match r.state {
-            GestureState::Absent => PointingState::Absent,
-            GestureState::Moving { .. } => PointingState::Moving,
+        t.pointing_state = wire_state(&r.state) as u32;
+        match r.state {
             GestureState::Indicated(p) => {
                 t.pointing_point_m = p.point_m.map(f);
                 t.pointing_sigma_m = f(p.sigma_m);
@@ -230,19 +228,10 @@ impl PointingRecord {
                     t.pointing_tip_px[v] = p.axes[v].tip_px.map(f);
                     t.pointing_line_px[v] = [f(p.axes[v].line.0[0]), f(p.axes[v].line.0[1]), f(p.axes[v].line.0[2])];
                 }
-                PointingState::Indicated
             }
-            GestureState::Degenerate { crossing_rad } => {
-                t.pointing_crossing_rad = f(crossing_rad);
-                PointingState::Degenerate
-            }
-            GestureState::Uncertain { sigma_m } => {
-                t.pointing_sigma_m = f(sigma_m);
-                PointingState::Uncertain
-            }
-            GestureState::Unsteady { .. } => PointingState::Unsteady,
-            GestureState::NoLine { .. } => PointingState::NoLine,
-            GestureState::Disagree { .. } => PointingState::Disagree,
-        } as u32;
+            GestureState::Degenerate { crossing_rad } => t.pointing_crossing_rad = f(crossing_rad),
+            GestureState::Uncertain { sigma_m } => t.pointing_sigma_m = f(sigma_m),
+            _ => {}
+        }
     }
 }
