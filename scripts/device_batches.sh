@@ -4,7 +4,9 @@
 # copy this script to devbin/run.sh, download the Vulkan loader debs into .gl (device README), and
 # ignore both in .git/info/exclude. There: BATCHES="rand50 clutter30" JOBS=12 bash devbin/run.sh check
 # (modes: check = snapshot + bench render, none); TRACK=1 also times devbin/tracker_profile_{base,new};
-# FIRST=31 starts the point30/given30 batches at seed 31 (unseen seeds).
+# FIRST=31 starts the point30/given30 batches at seed 31 (unseen seeds). ACROSS=1 keeps each run's
+# servo debug log (EXTRA="--config F" adds batch options) and writes every servo step's mark parallax across the epipolar lines to
+# $OUT/<batch>.across.txt (seed, step, across px).
 set -u
 MODE=${1:-check}
 for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
@@ -33,15 +35,25 @@ for b in ${BATCHES:-}; do
     c100) args="scenarios/clutter3.toml --seeds 30 --first-seed 100";;
     disturb30) args="scenarios/clutter3.toml --seeds 30 --disturb";;
   esac
-  timeout ${BT:-200} $B batch $args --jobs $J --json > $OUT/$b.json 2> $OUT/$b.err; echo "$b rc $? t=$(( $(date +%s) - t0 )) s"
+  n=$b${FIRST:+_f$FIRST}
+  keep=""
+  if [ -n "${ACROSS:-}" ]; then export HANDEYE_LOG="warn,handeye_daemon::phase::servo=debug"; keep="--out /tmp/runs/$n"; fi
+  timeout ${BT:-200} $B batch $args ${EXTRA:-} --jobs $J --json $keep > $OUT/$n.json 2> $OUT/$n.err; echo "$n rc $? t=$(( $(date +%s) - t0 )) s"
+  if [ -n "${ACROSS:-}" ]; then
+    for d in /tmp/runs/$n/*/seed-*; do
+      sed 's/\x1b\[[0-9;]*m//g' $d/daemon.stderr.log | grep -o "servo step step=[0-9]* .*across=\[[^]]*\]" | sed "s|^|${d##*seed-} |; s/ frame=.*across=/ /" >> $OUT/$n.across.txt
+    done
+    sed 's/\x1b\[[0-9;]*m//g' /tmp/runs/$n/*/seed-*/daemon.stderr.log 2>/dev/null | grep -c "parallax" | sed 's/^/parallax failures: /'
+  fi
   python3 -c "
-import json; d=json.load(open('$OUT/$b.json'))
-print('$b', {k:d.get(k) for k in ['runs','successes','graspable_runs','graspable_successes','correct_refusals','ungraspable_runs','attempts_on_ungraspable','wrong_refusals','median_run_wall_s']})
+import json; d=json.load(open('$OUT/$n.json'))
+print('$n', {k:d.get(k) for k in ['runs','successes','graspable_runs','graspable_successes','correct_refusals','ungraspable_runs','attempts_on_ungraspable','wrong_refusals','median_run_wall_s']})
 for r in d['runs_detail']:
     s=r['summary']
     if not s['success']: print('  fail', s['seed'], (s.get('failure_reason') or '')[:100])
-" 2>&1 | tail -40
-  tail -c 300 $OUT/$b.err
+print('$n', {k:d.get(k) for k in ['runs','successes','graspable_runs','graspable_successes','correct_refusals','ungraspable_runs','attempts_on_ungraspable','wrong_refusals']})
+" 2>&1 | tail -60
+  tail -c 300 $OUT/$n.err
 done
 echo "total t=$(( $(date +%s) - t0 )) s"
 if [ -n "${TRACK:-}" ]; then

@@ -52,6 +52,32 @@ fn the_gripper_is_tracked_on_every_frame_while_the_planner_works() {
     assert!(target.depth_m > 0.015 && target.depth_m < 0.055, "planned width {:.1} mm", target.depth_m * 1e3);
 }
 
+/// A plan that settles no grasp site looks again at fresh pairs, the arm held still, and
+/// fails only after `plan.max_looks` of them, saying so (the site must lie within 1 mm of the
+/// indicated point here, which no planned site does).
+#[test]
+fn a_plan_that_settles_no_site_looks_again_at_fresh_pairs_before_it_fails() {
+    let mut cfg = DaemonConfig::default();
+    cfg.plan.grasp.max_site_distance_m = 0.001;
+    cfg.plan.max_looks = 3;
+    let mut run = InProcess::planning(scenario("clutter3.toml"), cfg);
+    let mut moves_in_plan = 0;
+    while run.daemon.phase() != Phase::Failed {
+        let cmd = run.step();
+        assert!(run.frame < 3000 && run.daemon.phase() != Phase::AcquireTarget, "no site was to be found: {:?}", run.daemon.failure());
+        if run.daemon.telemetry().phase == Phase::Plan as u32 && run.daemon.mission().planning.stats().is_some() {
+            // Once the first look is in, the arm only holds while the next pairs are taken.
+            moves_in_plan += u32::from(!matches!(cmd.kind, 0 | 3));
+        }
+    }
+    let failure = run.daemon.failure().expect("a failure");
+    assert_eq!(failure.phase, "plan", "{failure:?}");
+    assert!(failure.detail.contains("no grasp site within 1 mm") && failure.detail.contains("the last of 3 pairs looked at"), "{failure:?}");
+    let stats = run.daemon.mission().planning.stats().expect("planning stats");
+    assert_eq!(stats.looks, 3, "{stats:?}");
+    assert_eq!(moves_in_plan, 0, "the arm moved between looks");
+}
+
 /// Two processes over shared memory, as a user runs it: `handeye run scenarios/clutter3.toml`
 /// plans its own grasp (no hint) and lifts the block nearest the indicated point.
 #[test]

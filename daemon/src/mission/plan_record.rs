@@ -13,6 +13,14 @@ pub struct PlanningStats {
     pub gripper_updates: [u64; 2],
     pub planner_ms: f64,
     pub total_ms: f64,
+    /// Pairs planned on: a plan that settled no grasp site looks again at a fresh pair, up to
+    /// `plan.max_looks` (absent in reports written before: one).
+    #[serde(default = "one")]
+    pub looks: u32,
+}
+
+fn one() -> u32 {
+    1
 }
 
 /// The plan's summary and the loop's numbers while planning (`None` before the plan phase,

@@ -1,5 +1,6 @@
 //! Plan (thesis ch. 5-6, DESIGN "Daemon phases"): with the arm parked clear of the blocks
-//! but in view, one stereo pair goes to the planner on the worker thread
+//! but in view, one stereo pair (the mean of `plan.average_frames` frames of the still
+//! scene) goes to the planner on the worker thread
 //! ([`crate::planning`]), the gripper's image region masked out; the hard loop meanwhile
 //! keeps tracking the gripper at frame rate and answering every frame (the thesis's robot
 //! was blind while it planned). The grasp site nearest the indicated point is chosen; its
@@ -12,6 +13,7 @@
 
 use std::fmt;
 
+use handeye_vision::image::{ImageBuf, ImageMean};
 use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, RejectReason};
@@ -32,6 +34,8 @@ enum Stage {
     Park { wait: Option<MoveWait> },
     /// Arm still for this many frames.
     Settle { still: u32 },
+    /// Summing frames of the still scene into the pair the planner gets.
+    Average { mean: Box<[ImageMean; 2]> },
     /// The pair is with the planner.
     Planning { job: PendingJob<Box<PlanOutput>> },
 }
@@ -42,6 +46,7 @@ impl fmt::Debug for Stage {
         match self {
             Self::Park { wait } => f.debug_struct("Park").field("wait", wait).finish(),
             Self::Settle { still } => f.debug_struct("Settle").field("still", still).finish(),
+            Self::Average { mean } => f.debug_struct("Average").field("frames", &mean[0].frames()).finish(),
             Self::Planning { job } => f.debug_struct("Planning").field("submitted", &job.submitted_frame()).finish(),
         }
     }
@@ -52,6 +57,35 @@ pub struct PlanPhase {
     stage: Stage,
     /// Gripper tracker update counts when the pair was handed over.
     updates_at_submit: [u64; 2],
+    /// Pairs handed to the planner so far.
+    looks: u32,
+    /// What each look that refused the pointed block said.
+    refusals: Vec<String>,
+}
+
+/// What the plan does after a look that chose no site.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum NextLook {
+    /// Look at a fresh pair.
+    Again,
+    /// Refuse the pointed block: looks enough have refused it.
+    Refuse,
+    /// No site, no refusal: the run fails saying so.
+    GiveUp,
+}
+
+/// After look number `looks` (1-based) chose no site: `refused`, whether it refused the
+/// pointed block; `refusing_looks`, how many looks refused so far, this one included. A
+/// refusal needs two refusing looks (one, when only one look is allowed); otherwise the plan
+/// looks again while `max_looks` allows.
+fn after_look(refused: bool, looks: u32, refusing_looks: u32, max_looks: u32) -> NextLook {
+    if refused && refusing_looks >= max_looks.min(2) {
+        NextLook::Refuse
+    } else if looks < max_looks {
+        NextLook::Again
+    } else {
+        NextLook::GiveUp
+    }
 }
 
 /// Convex hull (Andrew's monotone chain), counter-clockwise in image axes.
@@ -111,7 +145,7 @@ fn gripper_masks(m: &Mission, yaw_rad: f64) -> Option<[Vec<[f64; 2]>; 2]> {
 
 impl PlanPhase {
     pub fn new(time_ns: u64) -> Self {
-        Self { start_ns: time_ns, stage: Stage::Park { wait: None }, updates_at_submit: [0; 2] }
+        Self { start_ns: time_ns, stage: Stage::Park { wait: None }, updates_at_submit: [0; 2], looks: 0, refusals: Vec::new() }
     }
 
     fn gripper_updates(m: &Mission) -> [u64; 2] {
@@ -119,15 +153,82 @@ impl PlanPhase {
     }
 
     /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count;
-    /// a park move under way is sent again, a settle starts over; a pair already with the
+    /// a park move under way is sent again, a settle (or a mean of frames) starts over; a pair already with the
     /// planner stays there (it was taken before the loss).
     pub fn resume(&mut self, held_ns: u64) {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         match &mut self.stage {
             Stage::Park { wait } => *wait = None,
-            Stage::Settle { still } => *still = 0,
+            Stage::Settle { .. } | Stage::Average { .. } => self.stage = Stage::Settle { still: 0 },
             Stage::Planning { .. } => {}
         }
+    }
+
+    /// Adds this cycle's pair to the mean; once `plan.average_frames` are in, the mean pair
+    /// goes to the planner.
+    fn average(&mut self, m: &mut Mission, c: &Cycle<'_>, mean: &mut Box<[ImageMean; 2]>) -> Step {
+        let sizes_fit = mean.iter().zip([c.left, c.right]).all(|(mean, img)| mean.fits(img));
+        for (mean, img) in mean.iter_mut().zip([c.left, c.right]) {
+            if !sizes_fit {
+                // The camera changed its frame size: this pair starts a new mean.
+                mean.clear();
+            }
+            if mean.add(img).is_err() {
+                return Step::fail(FailureKind::Internal, "plan: a frame the mean refused after it was cleared");
+            }
+        }
+        if mean[0].frames() < m.cfg.plan.average_frames {
+            return self.keep_averaging(m, std::mem::take(mean));
+        }
+        let (Some(left), Some(right)) = (mean[0].mean(), mean[1].mean()) else {
+            return Step::fail(FailureKind::Internal, "plan: no frames averaged");
+        };
+        self.submit(m, c, [left, right])
+    }
+
+    fn keep_averaging(&mut self, m: &mut Mission, mean: Box<[ImageMean; 2]>) -> Step {
+        m.reporting.set_status("plan: averaging frames of the still scene");
+        self.stage = Stage::Average { mean };
+        Step::Stay(Cmd::HOLD)
+    }
+
+    /// Hands the pair to the planner on the worker (or waits a frame when it is busy).
+    fn submit(&mut self, m: &mut Mission, c: &Cycle<'_>, images: [ImageBuf; 2]) -> Step {
+        let Some(cal) = m.calibration.get() else { return Step::fail(FailureKind::Internal, "plan: not calibrated") };
+        let yaw = f64::from(c.robot.tool_yaw_rad);
+        let Some(masks) = gripper_masks(m, yaw) else {
+            return Step::fail(FailureKind::Internal, "plan: no gripper trackers to mask the gripper with");
+        };
+        let lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw));
+        let moment = PlanMoment {
+            images,
+            calibration: PlanCalibration {
+                model: cal.model.clone(),
+                cage_robot_m: cal.cage_robot_m.clone(),
+                cage_image_px: cal.cage_image_px.clone(),
+                lever_m: [lever.x, lever.y, lever.z],
+            },
+            masks,
+            indicated_m: m.targeting.indicated_m(),
+            indicated_sigma_m: m.targeting.indicated_sigma_m(),
+            max_height_m: f64::from(c.robot.tool_pos_m[2]) - m.cfg.plan.scene.arm_clearance_m,
+        };
+        let request = plan_request(&m.cfg, moment);
+        match PendingJob::submit(&mut m.worker, c.frame_index, move || Box::new(crate::planning::plan(request))) {
+            Some(job) => {
+                self.looks += 1;
+                self.updates_at_submit = Self::gripper_updates(m);
+                self.stage = Stage::Planning { job };
+                m.reporting.set_status("plan: planning; gripper tracked meanwhile");
+                m.reporting.snapshot("planning");
+            }
+            None => {
+                // The worker is busy (the pair went with the refused job): average anew.
+                m.reporting.set_status("plan: worker busy, waiting");
+                self.stage = Stage::Average { mean: Box::default() };
+            }
+        }
+        Step::Stay(Cmd::HOLD)
     }
 
     pub fn step(&mut self, m: &mut Mission, c: &Cycle<'_>) -> Step {
@@ -165,37 +266,17 @@ impl PlanPhase {
                     m.reporting.set_status("plan: arm parked, settling");
                     return Step::Stay(Cmd::HOLD);
                 }
-                let Some(cal) = m.calibration.get() else { return Step::fail(FailureKind::Internal, "plan: not calibrated") };
-                let yaw = f64::from(c.robot.tool_yaw_rad);
-                let Some(masks) = gripper_masks(m, yaw) else {
-                    return Step::fail(FailureKind::Internal, "plan: no gripper trackers to mask the gripper with");
-                };
-                let lever = tool_from_reference(&m.cfg.gripper, m.calibration.yaw_rad().unwrap_or(yaw));
-                // Allocates once: the pair the planner works on.
-                let moment = PlanMoment {
-                    images: [c.left.to_owned(), c.right.to_owned()],
-                    calibration: PlanCalibration {
-                        model: cal.model.clone(),
-                        cage_robot_m: cal.cage_robot_m.clone(),
-                        cage_image_px: cal.cage_image_px.clone(),
-                        lever_m: [lever.x, lever.y, lever.z],
-                    },
-                    masks,
-                    indicated_m: m.targeting.indicated_m(),
-                    indicated_sigma_m: m.targeting.indicated_sigma_m(),
-                    max_height_m: f64::from(c.robot.tool_pos_m[2]) - m.cfg.plan.scene.arm_clearance_m,
-                };
-                let request = plan_request(&m.cfg, moment);
-                match PendingJob::submit(&mut m.worker, c.frame_index, move || Box::new(crate::planning::plan(request))) {
-                    Some(job) => {
-                        self.updates_at_submit = Self::gripper_updates(m);
-                        self.stage = Stage::Planning { job };
-                        m.reporting.set_status("plan: planning; gripper tracked meanwhile");
-                        m.reporting.snapshot("planning");
-                    }
-                    None => m.reporting.set_status("plan: worker busy, waiting"),
+                let mut mean: Box<[ImageMean; 2]> = Box::default();
+                self.average(m, c, &mut mean)
+            }
+            Stage::Average { mean } => {
+                if c.robot.flags & robot_flags::MOVING != 0 {
+                    // The frames summed are of another scene: settle again and start over.
+                    self.stage = Stage::Settle { still: 0 };
+                    return Step::Stay(Cmd::HOLD);
                 }
-                Step::Stay(Cmd::HOLD)
+                let mut mean = std::mem::take(mean);
+                self.average(m, c, &mut mean)
             }
             Stage::Planning { job } => {
                 let Some(out) = job.poll(&mut m.worker, c.frame_index) else { return Step::Stay(Cmd::HOLD) };
@@ -205,6 +286,7 @@ impl PlanPhase {
                     gripper_updates: [now[0] - self.updates_at_submit[0], now[1] - self.updates_at_submit[1]],
                     planner_ms: out.summary.timing.planner_ms,
                     total_ms: out.summary.timing.total_ms,
+                    looks: self.looks,
                 };
                 let summary = out.summary.clone();
                 let target = out.target.clone();
@@ -227,7 +309,10 @@ impl PlanPhase {
                         return Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()));
                     }
                     // A refusal names the rules the pointed block fails, from this plan's own
-                    // facets, so that the user can tell a right refusal from a blind one.
+                    // facets, so that the user can tell a right refusal from a blind one. It is
+                    // claimed only when two looks refuse (a marginal edge read as an obstacle
+                    // refuses on one frame's noise and not on the next).
+                    let refused = refusal.is_some();
                     if let Some(why) = refusal {
                         let elsewhere = summary
                             .sites
@@ -236,23 +321,49 @@ impl PlanPhase {
                             .and_then(|c| c.place.distance_mm)
                             .map(|d| format!(" (the nearest site, on another block, is {d:.0} mm from the indicated point)"))
                             .unwrap_or_default();
-                        return Step::fail(FailureKind::Refused, format!("plan: refused: the pointed block has no graspable facet pair: {why}{elsewhere}"));
+                        self.refusals.push(format!("{why}{elsewhere}"));
                     }
+                    match after_look(refused, self.looks, self.refusals.len() as u32, m.cfg.plan.max_looks) {
+                        NextLook::Refuse => {
+                            let why = self.refusals.last().cloned().unwrap_or_default();
+                            return Step::fail(FailureKind::Refused, format!("plan: refused: the pointed block has no graspable facet pair: {why}"));
+                        }
+                        NextLook::Again => {
+                            // Nothing settled: many of the edges that decide it are near the
+                            // noise, so another frame may settle it. Look again at a fresh
+                            // pair, the arm still.
+                            tracing::info!(looks = self.looks, refused, "plan: no grasp site settled; looking again at a fresh pair");
+                            m.reporting.set_status("plan: no grasp site settled; looking again");
+                            self.stage = Stage::Settle { still: 0 };
+                            return Step::Stay(Cmd::HOLD);
+                        }
+                        NextLook::GiveUp => {}
+                    }
+                    if let Some(why) = self.refusals.first() {
+                        return Step::fail(FailureKind::NoGraspSite, format!(
+                            "plan: no grasp site, and no refusal confirmed: one of {} pairs looked at refused the pointed block ({why}), the others did not; not a refusal",
+                            self.looks
+                        ));
+                    }
+                    let looks = match self.looks {
+                        1 => String::new(),
+                        n => format!(" (the last of {n} pairs looked at)"),
+                    };
                     if let Some(seen) = unjudged {
                         return Step::fail(FailureKind::NoGraspSite, format!(
-                            "plan: no grasp site: what was seen of the pointed block does not settle whether it can be grasped ({seen}); not a refusal"
+                            "plan: no grasp site: what was seen of the pointed block does not settle whether it can be grasped ({seen}); not a refusal{looks}"
                         ));
                     }
                     if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
                         return Step::fail(FailureKind::NoGraspSite, format!(
-                            "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away)",
+                            "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away){looks}",
                             m.cfg.plan.grasp.max_site_distance_m * 1e3,
                             nearest.place.distance_mm.unwrap_or(f64::NAN)
                         ));
                     }
                     let reasons: Vec<String> = summary.sites.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
                     return Step::fail(FailureKind::NoGraspSite, format!(
-                        "plan: no grasp site ({} facets; rejected: {})",
+                        "plan: no grasp site ({} facets; rejected: {}){looks}",
                         summary.scene.facets.len(),
                         if reasons.is_empty() { "none found".into() } else { reasons.join(", ") }
                     ));
@@ -285,6 +396,70 @@ fn target_spec(t: &PlannedTarget) -> TargetSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Steps a fresh plan phase (not calibrated, so the hand-over itself fails) over frames
+    /// until it fails; `moving_at` marks frames on which the robot reports it moves. Returns
+    /// the frame of the hand-over and its failure.
+    fn frames_to_hand_over(average_frames: u32, moving_at: &[u64], size_at: impl Fn(u64) -> (usize, usize)) -> (u64, String) {
+        let mut cfg = crate::config::DaemonConfig::default();
+        cfg.plan.average_frames = average_frames;
+        let mut m = Mission::new(cfg, None).unwrap();
+        let mut phase = PlanPhase::new(0);
+        for frame in 0..100u64 {
+            let mut robot = handeye_wire::RobotState::default();
+            if moving_at.contains(&frame) {
+                robot.flags |= robot_flags::MOVING;
+            }
+            let (w, h) = size_at(frame);
+            let img = ImageBuf::filled(w, h, 100);
+            let (l, r) = (img.view(), img.view());
+            let c = Cycle { frame_index: frame, time_ns: frame * 33_333_333, frame_id: frame, robot: &robot, rejected_seq: None, seq: 1, left: &l, right: &r, states: Default::default() };
+            match phase.step(&mut m, &c) {
+                Step::Stay(_) => {}
+                Step::Fail(f) => return (frame, f.detail),
+                Step::Next(_) => panic!("no plan without a calibration"),
+            }
+        }
+        panic!("never handed over");
+    }
+
+    #[test]
+    fn the_planner_gets_the_mean_of_average_frames_of_a_still_arm() {
+        let settle = crate::config::DaemonConfig::default().plan.settle_frames as u64;
+        let size = |_| (8, 6);
+        // Frame 0 goes from park (none configured) to settle; settled after `settle` more
+        // still frames; the pair is the next frame, or the next `average_frames` of them.
+        let (one, why) = frames_to_hand_over(1, &[], size);
+        assert_eq!(one, settle + 1, "{why}");
+        assert!(why.contains("not calibrated"), "{why}");
+        assert_eq!(frames_to_hand_over(4, &[], size).0, one + 3);
+        // The arm moving in the middle of the mean starts the settle over.
+        let moved = one + 1;
+        assert_eq!(frames_to_hand_over(4, &[moved], size).0, moved + 1 + settle + 3);
+        // A frame of another size starts the mean over at that frame.
+        let (resized, _) = frames_to_hand_over(4, &[], |f| if f >= one + 2 { (10, 6) } else { (8, 6) });
+        assert_eq!(resized, one + 2 + 3);
+    }
+
+    #[test]
+    fn a_refusal_needs_two_looks_that_refuse_and_unsettled_looks_look_again() {
+        use NextLook::*;
+        // Refused, refused: refused on the second look.
+        assert_eq!(after_look(true, 1, 1, 3), Again);
+        assert_eq!(after_look(true, 2, 2, 3), Refuse);
+        // Refused then unsettled twice: no refusal.
+        assert_eq!(after_look(false, 2, 1, 3), Again);
+        assert_eq!(after_look(false, 3, 1, 3), GiveUp);
+        // Unsettled, refused, refused.
+        assert_eq!(after_look(false, 1, 0, 3), Again);
+        assert_eq!(after_look(true, 2, 1, 3), Again);
+        assert_eq!(after_look(true, 3, 2, 3), Refuse);
+        // Unsettled twice, then a refusal nothing can confirm.
+        assert_eq!(after_look(true, 3, 1, 3), GiveUp);
+        // One look allowed: it decides alone, as before looks were counted.
+        assert_eq!(after_look(true, 1, 1, 1), Refuse);
+        assert_eq!(after_look(false, 1, 0, 1), GiveUp);
+    }
 
     #[test]
     fn hull_of_a_square_with_inner_points() {
