@@ -701,6 +701,7 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     // cameras' when fitted: they reconstruct the scene; else the affine model's) and the
     // segments' fit, at the indicated point's depth ([`point_sigma_m`]).
     let at = indicated.unwrap_or_else(|| Vector3::new(0.0, 0.0, req.scene.table_z_m));
+    req.grasp.indicated_sigma_m = req.scene.indicated_sigma_m;
     req.grasp.point_sigma_m = point_sigma_m(summary.geometry.projective_residual_px.unwrap_or(model_residual_px), &|q| project_scene(&geo, &req.calibration.model, &req.calibration.lever_m, q), &at);
     tracing::debug!(point_sigma_mm = req.grasp.point_sigma_m * 1e3, "height error of a reconstructed point");
     let mut grasps = match plan_grasps(&ps.scene, indicated.as_ref(), &req.grasp) {

@@ -206,6 +206,13 @@ pub struct GraspConfig {
     /// it is past the limit by more than [`ERROR_SIGMAS`] of its error, used only when it is
     /// within the limit by as much, and otherwise left unsettled (neither).
     pub point_sigma_m: f64,
+    /// One-sigma radius of the indicated point, metres: 0 (the default) for a point given as
+    /// a coordinate; a pointed point's (the operator's finger line) is centimetres. Of the
+    /// sites on the nearest site's object, those nearer than the nearest plus what the
+    /// point's error can change ([`ERROR_SIGMAS`] of it) are as near, and the one facing the
+    /// cameras most is chosen: the point picks the block, the uncertain point does not pick
+    /// a face of it that the cameras see edge-on.
+    pub indicated_sigma_m: f64,
 }
 
 /// How many sigmas of a measure's error a rule's verdict must clear: about 95 % one-sided.
@@ -232,6 +239,7 @@ impl Default for GraspConfig {
             object_tolerance_m: 0.003,
             max_view_angle_rad: std::f64::consts::FRAC_PI_2,
             point_sigma_m: 0.0,
+            indicated_sigma_m: 0.0,
         }
     }
 }
@@ -369,6 +377,7 @@ impl GraspConfig {
             ("max_rear_drop_m", self.max_rear_drop_m),
             ("object_tolerance_m", self.object_tolerance_m),
             ("point_sigma_m", self.point_sigma_m),
+            ("indicated_sigma_m", self.indicated_sigma_m),
         ];
         if let Some(o) = g.jaw_opening_m
             && !(o > 0.0 && o.is_finite() && o >= g.max_width_m)
@@ -723,12 +732,19 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
             // Of sites as near the point as the nearest (two faces of one block: an across-
             // the-block grasp is centred on the block whichever face it is servoed on), the
             // one on the face that looks most towards the cameras: a face seen edge-on is a
-            // few pixels wide, and its trackers cannot hold it.
+            // few pixels wide, and its trackers cannot hold it. On the nearest site's own
+            // object, "as near" also takes in the indicated point's own error.
             let toward = Vector3::new(scene.toward_viewer[0], scene.toward_viewer[1], 0.0).try_normalize(1e-12);
             if let (Some(first), Some(toward)) = (candidates.first(), toward) {
+                let object = |g: &Grasp| scene.facets[g.site.facet].component;
                 let reach = plan_distance(first) + EQUAL_DISTANCE_M;
+                let own_reach = plan_distance(first) + EQUAL_DISTANCE_M.hypot(ERROR_SIGMAS * config.indicated_sigma_m);
+                let as_near = |g: &Grasp| plan_distance(g) <= if object(g) == object(first) { own_reach } else { reach };
                 let facing = |g: &Grasp| polygon_normal(&scene.facets[g.site.facet].polygon_m).map_or(0.0, |n| Vector3::new(n[0], n[1], 0.0).normalize().dot(&toward).abs());
-                let best = (0..candidates.len()).take_while(|&i| plan_distance(&candidates[i]) <= reach).reduce(|b, i| if facing(&candidates[i]) > facing(&candidates[b]) + 1e-9 { i } else { b });
+                let best = (0..candidates.len())
+                    .take_while(|&i| plan_distance(&candidates[i]) <= own_reach.max(reach))
+                    .filter(|&i| as_near(&candidates[i]))
+                    .reduce(|b, i| if facing(&candidates[i]) > facing(&candidates[b]) + 1e-9 { i } else { b });
                 if let Some(best) = best {
                     candidates[..=best].rotate_right(1);
                 }

@@ -429,6 +429,37 @@ fn the_width_limit_is_the_gripper_models() {
 }
 
 #[test]
+fn a_pointed_points_error_widens_as_near_on_its_own_object_only() {
+    // Two 25 x 42 x 30 mm bars 58 mm apart along y. Bar A offers its +y end face (seen nearly
+    // edge-on from the cameras at +x), bar B its +x face. The point lies 46 mm from A's site
+    // and 54 mm from B's.
+    let (x1, h) = (0.025, 0.03);
+    let bars = |b_component: usize| {
+        let (a0, a1, b0, b1) = (0.0, 0.042, 0.1, 0.142);
+        let a_end = facet(vec![p(0.0, a1, 0.0), p(x1, a1, 0.0), p(x1, a1, h), p(0.0, a1, h)], 0);
+        let a_top = facet(vec![p(0.0, a0, h), p(x1, a0, h), p(x1, a1, h), p(0.0, a1, h)], 0);
+        let b_front = facet(vec![p(x1, b0, 0.0), p(x1, b1, 0.0), p(x1, b1, h), p(x1, b0, h)], b_component);
+        let b_top = facet(vec![p(0.0, b0, h), p(x1, b0, h), p(x1, b1, h), p(0.0, b1, h)], b_component);
+        scene(vec![a_end, a_top, b_front, b_top], vec![])
+    };
+    let point = p(0.0125, 0.067, 0.0);
+    let chosen = |s: &GraspScene, sigma_m: f64| {
+        let cfg = GraspConfig { indicated_sigma_m: sigma_m, ..GraspConfig::default() };
+        plan_grasps(s, Some(&point), &cfg).unwrap().chosen.expect("a site").site.facet
+    };
+    // A point given as a coordinate: the nearest site, A's end face (8 mm nearer).
+    assert_eq!(chosen(&bars(0), 0.0), 0);
+    // A pointed point with a 6.5 mm sigma cannot tell 8 mm apart: of its object's sites,
+    // the one facing the cameras.
+    assert_eq!(chosen(&bars(0), 0.0065), 2);
+    // A site on another object is not drawn in by the point's error: the point picks the
+    // object (and the plan judges elsewhere whether it picks one at all).
+    assert_eq!(chosen(&bars(1), 0.0065), 0);
+    // A 2 mm sigma does not reach 8 mm either.
+    assert_eq!(chosen(&bars(0), 0.002), 0);
+}
+
+#[test]
 fn of_two_faces_as_near_the_point_the_one_facing_the_cameras_is_chosen() {
     // A 25 x 42 x 30 mm bar: its +y end face listed first, its long +x face (towards the
     // cameras at +x) second, and its top. Both grasps are centred on the bar, as near the
