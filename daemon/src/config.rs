@@ -476,8 +476,10 @@ pub struct ServoLimits {
     pub max_yaw_step_deg: f64,
     /// A gripper mark's parallax may leave the epipolar direction by this much, px (plus
     /// `max_across_ratio` of its length) before the servo calls a tracker wrong. The facet's
-    /// plane transfer is extrapolated a few facet heights up to the plate, and under real
-    /// perspective that leaves a systematic ~10 px across the epipolar lines.
+    /// plane transfer is extrapolated a few facet heights up to the plate. Measured over 80
+    /// servoed runs (BENCHMARKS, issue 19 ninth pass) it leaves 0.5-4 px across the epipolar
+    /// lines on all but three (clutter3 121 and 127: 6-11 px; point_clutter3 35: 20 px, its
+    /// target a hypothesised face).
     pub max_across_px: f64,
     pub max_across_ratio: f64,
 }
