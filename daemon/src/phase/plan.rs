@@ -153,8 +153,8 @@ impl PlanPhase {
     }
 
     /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count;
-    /// a park move under way is sent again, a settle (or a mean of frames) starts over; a pair already with the
-    /// planner stays there (it was taken before the loss).
+    /// a park move under way is sent again, a settle (or a mean of frames) starts over; a
+    /// pair already with the planner stays there (it was taken before the loss).
     pub fn resume(&mut self, held_ns: u64) {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         match &mut self.stage {
@@ -192,7 +192,8 @@ impl PlanPhase {
         Step::Stay(Cmd::HOLD)
     }
 
-    /// Hands the pair to the planner on the worker (or waits a frame when it is busy).
+    /// Hands the pair to the planner on the worker (allocates the request: once a look), or
+    /// waits a frame when the worker is busy.
     fn submit(&mut self, m: &mut Mission, c: &Cycle<'_>, images: [ImageBuf; 2]) -> Step {
         let Some(cal) = m.calibration.get() else { return Step::fail(FailureKind::Internal, "plan: not calibrated") };
         let yaw = f64::from(c.robot.tool_yaw_rad);
@@ -223,9 +224,10 @@ impl PlanPhase {
                 m.reporting.snapshot("planning");
             }
             None => {
-                // The worker is busy (the pair went with the refused job): average anew.
+                // The worker is busy (the pair went with the refused job): the arm is still
+                // settled, so the next frame starts a new pair.
                 m.reporting.set_status("plan: worker busy, waiting");
-                self.stage = Stage::Average { mean: Box::default() };
+                self.stage = Stage::Settle { still: m.cfg.plan.settle_frames };
             }
         }
         Step::Stay(Cmd::HOLD)
@@ -265,6 +267,10 @@ impl PlanPhase {
                 if *still <= m.cfg.plan.settle_frames {
                     m.reporting.set_status("plan: arm parked, settling");
                     return Step::Stay(Cmd::HOLD);
+                }
+                if m.cfg.plan.average_frames <= 1 {
+                    // One pair: copied as it is (no sum to allocate on a loop frame).
+                    return self.submit(m, c, [c.left.to_owned(), c.right.to_owned()]);
                 }
                 let mut mean: Box<[ImageMean; 2]> = Box::default();
                 self.average(m, c, &mut mean)
