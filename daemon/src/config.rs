@@ -235,11 +235,6 @@ pub struct PlanSettings {
     pub park_m: Vec<f64>,
     /// Frames the arm must be still before the stereo pair is taken.
     pub settle_frames: u32,
-    /// Frames of the still scene averaged into the pair the planner gets (1 = one pair): the
-    /// mean of 4 halves the sensor noise. The planner's edge thresholds follow the measured
-    /// noise down, and on clutter3 the fainter edges it then finds cost grasps (seeds 100-129:
-    /// 27/30 at 4 frames against 30/30 at 1; BENCHMARKS, issue 19 ninth pass): off by default.
-    pub average_frames: u32,
     /// Pairs the plan may look at: a plan that finds no grasp site, or none that settles
     /// whether the pointed block can be grasped, looks again at a fresh pair (another frame's
     /// noise decides many marginal edges), and a refusal is claimed only when two looks refuse
@@ -262,7 +257,6 @@ impl Default for PlanSettings {
         Self {
             park_m: Vec::new(),
             settle_frames: 5,
-            average_frames: 1,
             max_looks: 3,
             stereo: PlanStereo::default(),
             mask: PlanMask::default(),
@@ -795,9 +789,6 @@ impl DaemonConfig {
         if !(1..=10).contains(&self.plan.max_looks) {
             return bad("plan.max_looks", self.plan.max_looks.to_string(), "1 (one pair) to 10 pairs");
         }
-        if !(1..=256).contains(&self.plan.average_frames) {
-            return bad("plan.average_frames", self.plan.average_frames.to_string(), "1 (one pair) to 256 frames");
-        }
         if !(self.plan.park_m.is_empty() || self.plan.park_m.len() == 3) {
             return bad("plan.park_m", format!("{:?}", self.plan.park_m), "empty or [x, y, z]");
         }
@@ -995,7 +986,6 @@ mod tests {
             "target.timeout_s",
             "plan.park_m",
             "plan.settle_frames",
-            "plan.average_frames",
             "plan.max_looks",
             "plan.epipolar_tol_px",
             "plan.disparity_margin",

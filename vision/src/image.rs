@@ -137,83 +137,6 @@ impl ImageBuf {
     }
 }
 
-/// The pixel-wise mean of a few frames of a still scene: sensor noise falls as the square
-/// root of their number, so a planner that scales its edge thresholds by the measured noise
-/// finds fainter edges, and its result no longer turns on one frame's noise.
-///
-/// ```
-/// use handeye_vision::image::{ImageBuf, ImageMean};
-/// let mut mean = ImageMean::default();
-/// mean.add(&ImageBuf::filled(2, 1, 10).view()).unwrap();
-/// mean.add(&ImageBuf::filled(2, 1, 13).view()).unwrap();
-/// assert_eq!(mean.frames(), 2);
-/// assert_eq!(mean.mean().unwrap().data, vec![12, 12]); // 11.5 rounds half up
-/// ```
-#[derive(Debug, Clone, Default)]
-pub struct ImageMean {
-    sum: Vec<u32>,
-    width: usize,
-    height: usize,
-    frames: u32,
-}
-
-/// A frame whose size is not that of the frames already summed.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("a {got_width}x{got_height} frame cannot join the mean of {width}x{height} frames")]
-pub struct ImageMeanSizeError {
-    pub width: usize,
-    pub height: usize,
-    pub got_width: usize,
-    pub got_height: usize,
-}
-
-impl ImageMean {
-    /// Adds a frame; the first one sets the size.
-    pub fn add(&mut self, img: &ImageView<'_>) -> Result<(), ImageMeanSizeError> {
-        if self.frames == 0 {
-            self.width = img.width();
-            self.height = img.height();
-            self.sum.clear();
-            self.sum.resize(self.width * self.height, 0);
-        } else if (img.width(), img.height()) != (self.width, self.height) {
-            return Err(ImageMeanSizeError { width: self.width, height: self.height, got_width: img.width(), got_height: img.height() });
-        }
-        for y in 0..self.height {
-            let row = &mut self.sum[y * self.width..(y + 1) * self.width];
-            for (s, &p) in row.iter_mut().zip(img.row(y)) {
-                *s += u32::from(p);
-            }
-        }
-        self.frames += 1;
-        Ok(())
-    }
-
-    /// Whether `img` can join the mean (the first frame always can).
-    pub fn fits(&self, img: &ImageView<'_>) -> bool {
-        self.frames == 0 || (img.width(), img.height()) == (self.width, self.height)
-    }
-
-    /// Frames summed so far.
-    pub fn frames(&self) -> u32 {
-        self.frames
-    }
-
-    /// Starts over.
-    pub fn clear(&mut self) {
-        self.frames = 0;
-    }
-
-    /// The mean frame, rounded to the nearest grey level; `None` before the first frame.
-    pub fn mean(&self) -> Option<ImageBuf> {
-        if self.frames == 0 {
-            return None;
-        }
-        let n = self.frames;
-        let data = self.sum.iter().map(|&s| ((s + n / 2) / n).min(255) as u8).collect();
-        ImageBuf::from_vec(data, self.width, self.height)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,25 +158,5 @@ mod tests {
         let bytes = [1u8, 2, 0, 3, 4, 0];
         let img = ImageView::new(&bytes, 2, 2, 3).unwrap().to_owned();
         assert_eq!(img.data, vec![1, 2, 3, 4]);
-    }
-
-    #[test]
-    fn mean_of_frames_rounds_per_pixel_skips_padding_and_refuses_another_size() {
-        // Two 2x2 frames with a padding byte per row that must not be summed.
-        let a = [0u8, 255, 99, 10, 7, 99];
-        let b = [1u8, 255, 0, 20, 8, 0];
-        let mut mean = ImageMean::default();
-        assert!(mean.mean().is_none());
-        mean.add(&ImageView::new(&a, 2, 2, 3).unwrap()).unwrap();
-        mean.add(&ImageView::new(&b, 2, 2, 3).unwrap()).unwrap();
-        // 0.5 -> 1, 255 stays, 15, 7.5 -> 8.
-        assert_eq!(mean.mean().unwrap().data, vec![1, 255, 15, 8]);
-        let err = mean.add(&ImageBuf::new(3, 2).view()).unwrap_err();
-        assert_eq!((err.width, err.got_width), (2, 3));
-        assert_eq!(mean.frames(), 2, "a refused frame is not counted");
-        assert!(!mean.fits(&ImageBuf::new(3, 2).view()) && mean.fits(&ImageBuf::new(2, 2).view()));
-        mean.clear();
-        mean.add(&ImageBuf::new(3, 2).view()).unwrap();
-        assert_eq!(mean.mean().unwrap().data, vec![0; 6], "a cleared mean starts over at the new size");
     }
 }

@@ -1,6 +1,5 @@
 //! Plan (thesis ch. 5-6, DESIGN "Daemon phases"): with the arm parked clear of the blocks
-//! but in view, one stereo pair (the mean of `plan.average_frames` frames of the still
-//! scene) goes to the planner on the worker thread
+//! but in view, one stereo pair goes to the planner on the worker thread
 //! ([`crate::planning`]), the gripper's image region masked out; the hard loop meanwhile
 //! keeps tracking the gripper at frame rate and answering every frame (the thesis's robot
 //! was blind while it planned). The grasp site nearest the indicated point is chosen; its
@@ -13,7 +12,7 @@
 
 use std::fmt;
 
-use handeye_vision::image::{ImageBuf, ImageMean};
+use handeye_vision::image::ImageBuf;
 use handeye_vision::tracker::{Role, View};
 use handeye_wire::report::FailureKind;
 use handeye_wire::{robot_flags, RejectReason};
@@ -34,8 +33,6 @@ enum Stage {
     Park { wait: Option<MoveWait> },
     /// Arm still for this many frames.
     Settle { still: u32 },
-    /// Summing frames of the still scene into the pair the planner gets.
-    Average { mean: Box<[ImageMean; 2]> },
     /// The pair is with the planner.
     Planning { job: PendingJob<Box<PlanOutput>> },
 }
@@ -46,7 +43,6 @@ impl fmt::Debug for Stage {
         match self {
             Self::Park { wait } => f.debug_struct("Park").field("wait", wait).finish(),
             Self::Settle { still } => f.debug_struct("Settle").field("still", still).finish(),
-            Self::Average { mean } => f.debug_struct("Average").field("frames", &mean[0].frames()).finish(),
             Self::Planning { job } => f.debug_struct("Planning").field("submitted", &job.submitted_frame()).finish(),
         }
     }
@@ -153,43 +149,15 @@ impl PlanPhase {
     }
 
     /// Picks up after the arm held `held_ns` for a lost tracker: the time held does not count;
-    /// a park move under way is sent again, a settle (or a mean of frames) starts over; a
-    /// pair already with the planner stays there (it was taken before the loss).
+    /// a park move under way is sent again, a settle starts over; a pair already with the
+    /// planner stays there (it was taken before the loss).
     pub fn resume(&mut self, held_ns: u64) {
         self.start_ns = self.start_ns.saturating_add(held_ns);
         match &mut self.stage {
             Stage::Park { wait } => *wait = None,
-            Stage::Settle { .. } | Stage::Average { .. } => self.stage = Stage::Settle { still: 0 },
+            Stage::Settle { still } => *still = 0,
             Stage::Planning { .. } => {}
         }
-    }
-
-    /// Adds this cycle's pair to the mean; once `plan.average_frames` are in, the mean pair
-    /// goes to the planner.
-    fn average(&mut self, m: &mut Mission, c: &Cycle<'_>, mean: &mut Box<[ImageMean; 2]>) -> Step {
-        let sizes_fit = mean.iter().zip([c.left, c.right]).all(|(mean, img)| mean.fits(img));
-        for (mean, img) in mean.iter_mut().zip([c.left, c.right]) {
-            if !sizes_fit {
-                // The camera changed its frame size: this pair starts a new mean.
-                mean.clear();
-            }
-            if mean.add(img).is_err() {
-                return Step::fail(FailureKind::Internal, "plan: a frame the mean refused after it was cleared");
-            }
-        }
-        if mean[0].frames() < m.cfg.plan.average_frames {
-            return self.keep_averaging(m, std::mem::take(mean));
-        }
-        let (Some(left), Some(right)) = (mean[0].mean(), mean[1].mean()) else {
-            return Step::fail(FailureKind::Internal, "plan: no frames averaged");
-        };
-        self.submit(m, c, [left, right])
-    }
-
-    fn keep_averaging(&mut self, m: &mut Mission, mean: Box<[ImageMean; 2]>) -> Step {
-        m.reporting.set_status("plan: averaging frames of the still scene");
-        self.stage = Stage::Average { mean };
-        Step::Stay(Cmd::HOLD)
     }
 
     /// Hands the pair to the planner on the worker (allocates the request: once a look), or
@@ -268,21 +236,8 @@ impl PlanPhase {
                     m.reporting.set_status("plan: arm parked, settling");
                     return Step::Stay(Cmd::HOLD);
                 }
-                if m.cfg.plan.average_frames <= 1 {
-                    // One pair: copied as it is (no sum to allocate on a loop frame).
-                    return self.submit(m, c, [c.left.to_owned(), c.right.to_owned()]);
-                }
-                let mut mean: Box<[ImageMean; 2]> = Box::default();
-                self.average(m, c, &mut mean)
-            }
-            Stage::Average { mean } => {
-                if c.robot.flags & robot_flags::MOVING != 0 {
-                    // The frames summed are of another scene: settle again and start over.
-                    self.stage = Stage::Settle { still: 0 };
-                    return Step::Stay(Cmd::HOLD);
-                }
-                let mut mean = std::mem::take(mean);
-                self.average(m, c, &mut mean)
+                // Allocates once a look: the pair the planner works on.
+                self.submit(m, c, [c.left.to_owned(), c.right.to_owned()])
             }
             Stage::Planning { job } => {
                 let Some(out) = job.poll(&mut m.worker, c.frame_index) else { return Step::Stay(Cmd::HOLD) };
@@ -402,50 +357,6 @@ fn target_spec(t: &PlannedTarget) -> TargetSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Steps a fresh plan phase (not calibrated, so the hand-over itself fails) over frames
-    /// until it fails; `moving_at` marks frames on which the robot reports it moves. Returns
-    /// the frame of the hand-over and its failure.
-    fn frames_to_hand_over(average_frames: u32, moving_at: &[u64], size_at: impl Fn(u64) -> (usize, usize)) -> (u64, String) {
-        let mut cfg = crate::config::DaemonConfig::default();
-        cfg.plan.average_frames = average_frames;
-        let mut m = Mission::new(cfg, None).unwrap();
-        let mut phase = PlanPhase::new(0);
-        for frame in 0..100u64 {
-            let mut robot = handeye_wire::RobotState::default();
-            if moving_at.contains(&frame) {
-                robot.flags |= robot_flags::MOVING;
-            }
-            let (w, h) = size_at(frame);
-            let img = ImageBuf::filled(w, h, 100);
-            let (l, r) = (img.view(), img.view());
-            let c = Cycle { frame_index: frame, time_ns: frame * 33_333_333, frame_id: frame, robot: &robot, rejected_seq: None, seq: 1, left: &l, right: &r, states: Default::default() };
-            match phase.step(&mut m, &c) {
-                Step::Stay(_) => {}
-                Step::Fail(f) => return (frame, f.detail),
-                Step::Next(_) => panic!("no plan without a calibration"),
-            }
-        }
-        panic!("never handed over");
-    }
-
-    #[test]
-    fn the_planner_gets_the_mean_of_average_frames_of_a_still_arm() {
-        let settle = crate::config::DaemonConfig::default().plan.settle_frames as u64;
-        let size = |_| (8, 6);
-        // Frame 0 goes from park (none configured) to settle; settled after `settle` more
-        // still frames; the pair is the next frame, or the next `average_frames` of them.
-        let (one, why) = frames_to_hand_over(1, &[], size);
-        assert_eq!(one, settle + 1, "{why}");
-        assert!(why.contains("not calibrated"), "{why}");
-        assert_eq!(frames_to_hand_over(4, &[], size).0, one + 3);
-        // The arm moving in the middle of the mean starts the settle over.
-        let moved = one + 1;
-        assert_eq!(frames_to_hand_over(4, &[moved], size).0, moved + 1 + settle + 3);
-        // A frame of another size starts the mean over at that frame.
-        let (resized, _) = frames_to_hand_over(4, &[], |f| if f >= one + 2 { (10, 6) } else { (8, 6) });
-        assert_eq!(resized, one + 2 + 3);
-    }
 
     #[test]
     fn a_refusal_needs_two_looks_that_refuse_and_unsettled_looks_look_again() {

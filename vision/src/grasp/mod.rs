@@ -738,11 +738,12 @@ pub fn plan_grasps(scene: &GraspScene, indicated_m: Option<&Vector3<f64>>, confi
             if let (Some(first), Some(toward)) = (candidates.first(), toward) {
                 let object = |g: &Grasp| scene.facets[g.site.facet].component;
                 let reach = plan_distance(first) + EQUAL_DISTANCE_M;
+                // At least `reach`: the point's error only adds to the reconstruction's.
                 let own_reach = plan_distance(first) + EQUAL_DISTANCE_M.hypot(ERROR_SIGMAS * config.indicated_sigma_m);
                 let as_near = |g: &Grasp| plan_distance(g) <= if object(g) == object(first) { own_reach } else { reach };
                 let facing = |g: &Grasp| polygon_normal(&scene.facets[g.site.facet].polygon_m).map_or(0.0, |n| Vector3::new(n[0], n[1], 0.0).normalize().dot(&toward).abs());
                 let best = (0..candidates.len())
-                    .take_while(|&i| plan_distance(&candidates[i]) <= own_reach.max(reach))
+                    .take_while(|&i| plan_distance(&candidates[i]) <= own_reach)
                     .filter(|&i| as_near(&candidates[i]))
                     .reduce(|b, i| if facing(&candidates[i]) > facing(&candidates[b]) + 1e-9 { i } else { b });
                 if let Some(best) = best {
