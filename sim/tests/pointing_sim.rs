@@ -179,10 +179,11 @@ fn thirty_rendered_gestures_indicate_where_the_hand_aimed() {
     let uncertain = refused(|s| matches!(s, GestureState::Uncertain { .. }));
     let no_line = refused(|s| matches!(s, GestureState::NoLine { .. }));
     let unsteady = refused(|s| matches!(s, GestureState::Unsteady { .. }));
+    let disagree = refused(|s| matches!(s, GestureState::Disagree { .. }));
     let unanswered = refused(|s| matches!(s, GestureState::Absent | GestureState::Moving { .. }));
     update_us.sort_by(f64::total_cmp);
     eprintln!(
-        "{} of {GESTURES} indicated: median {:.1} mm, p90 {:.1} mm, max {:.1} mm; reported instead: degenerate {degenerate:?}, uncertain {uncertain:?}, no line in a view {no_line:?}, unsteady {unsteady:?}; nothing by the end of the hold {unanswered:?}; update p50 {:.0} µs, max {:.0} µs",
+        "{} of {GESTURES} indicated: median {:.1} mm, p90 {:.1} mm, max {:.1} mm; reported instead: degenerate {degenerate:?}, uncertain {uncertain:?}, no line in a view {no_line:?}, unsteady {unsteady:?}, disagree {disagree:?}; nothing by the end of the hold {unanswered:?}; update p50 {:.0} µs, max {:.0} µs",
         errors.len(),
         rank(0.5) * 1e3,
         rank(0.9) * 1e3,

@@ -96,10 +96,16 @@ pub fn plane_maps_from(cage_robot_m: &[Vector3<f64>], cage_image_px: &[[f64; 4]]
     Ok((Pointing::new(fit(0)?, fit(1)?), z, cams.residual_rms_px))
 }
 
-/// A refusal that came from a steady window (the hand held still: uncertain, degenerate,
-/// disagree).
-fn steady_refusal(outcome: &str) -> bool {
-    matches!(outcome, "uncertain" | "degenerate" | "disagree")
+/// How much a refusal says about the gesture, for keeping the most telling one of a hand:
+/// one from a steady window (the hand held still: uncertain, degenerate, disagree) most, then
+/// "unsteady" (lines in both views that never held still), then "no line" (which a hand that
+/// was read in both views also ends with as it withdraws through one view first).
+fn refusal_rank(outcome: &str) -> u8 {
+    match outcome {
+        "uncertain" | "degenerate" | "disagree" => 2,
+        "unsteady" => 1,
+        _ => 0,
+    }
 }
 
 /// Both plate trackers track on this frame.
@@ -236,10 +242,9 @@ impl PointPhase {
                             m.reporting.set_status("point: gesture refused so far; watching it while the hand holds");
                             m.reporting.snapshot("point_refused");
                         }
-                        // The most telling refusal stands: one from a steady window
-                        // (uncertain, degenerate, disagree) over a later "unsteady" or "no line" of the
-                        // same hand.
-                        if refusal.as_ref().is_none_or(|old| steady_refusal(&g.outcome) >= steady_refusal(&old.outcome)) {
+                        // The most telling refusal of the hand stands (`refusal_rank`), the
+                        // newest of equal rank.
+                        if refusal.as_ref().is_none_or(|old| refusal_rank(&g.outcome) >= refusal_rank(&old.outcome)) {
                             *refusal = Some(Box::new(g));
                         }
                     }
@@ -371,6 +376,16 @@ mod tests {
     use super::*;
     use handeye_vision::pointing::ImageLine;
     use crate::test_cameras::{camera, px};
+
+    #[test]
+    fn a_hand_read_unsteady_is_not_recorded_as_its_withdrawal() {
+        // Lines in both views that never held still, then one view loses the hand first as it
+        // goes: the gesture's refusal is "unsteady" (seed 57 reported three "no line"s), and a
+        // steady window's refusal outranks both.
+        assert!(refusal_rank("unsteady") > refusal_rank("no_line"));
+        assert!(refusal_rank("uncertain") > refusal_rank("unsteady"));
+        assert_eq!(refusal_rank("degenerate"), refusal_rank("disagree"));
+    }
 
     #[test]
     fn the_plane_maps_carry_finger_lines_to_the_point_on_the_lowest_cage_plane() {

@@ -81,6 +81,8 @@ pub enum SilhouetteError {
     NotElongated,
     #[error("too few clean cross-sections across the arm ({sections})")]
     TooFewSections { sections: usize },
+    #[error("the arm's narrow end runs out of the image ({narrow_px} px wide against {wide_px} px inside): no fingertip in view")]
+    NarrowEndOutside { narrow_px: u32, wide_px: u32 },
 }
 
 /// Reusable buffers for finding the arm's axis in one view.
@@ -98,6 +100,8 @@ pub struct SilhouetteFinder {
     keep: Vec<bool>,
     /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
     tip_at_start: bool,
+    /// The mean widths of the last fit's five sections at its start and at its end, px.
+    end_widths_px: [f64; 2],
     finger: FingerFinder,
     /// The finger part's pixels when the last axis came from it (else empty).
     finger_pixels: Vec<(u16, u16)>,
@@ -272,6 +276,22 @@ impl SilhouetteFinder {
         if let Some(root) = root_px {
             let s_root = (root[0] - cx) * ex + (root[1] - cy) * ey;
             self.tip_at_start = s_root > 0.5 * (fit.s_min + fit.s_max);
+        } else if let Some(tail_at_start) = self.border_end() {
+            // An arm that runs out of the image at one end has its tail there: it belongs to
+            // someone outside. Where its ends are as wide (a finger cut by the border, the hand
+            // out of view), the width rule flipped the tip between the fingertip and the border
+            // from frame to frame on noise, and the hand never held "still" (point_clutter3
+            // seed 57): the border decides. Where the end that runs out is clearly the narrower
+            // (a forearm under a hand seen from the back, wider than it), the finger is not
+            // resolved at the other end, and the midline is the hand's, not the finger's (on
+            // point_clutter3 seed 60's second gesture such a line pointed 130 mm off): no line
+            // from the whole silhouette; the finger as a part of its own may still give one.
+            let [first, last] = self.end_widths_px;
+            let (narrow, wide) = if tail_at_start { (first, last) } else { (last, first) };
+            if narrow + 2.0 * self.config.max_width_step_px < wide {
+                return Err(SilhouetteError::NarrowEndOutside { narrow_px: narrow.round() as u32, wide_px: wide.round() as u32 });
+            }
+            self.tip_at_start = !tail_at_start;
         }
         let tip_at_start = self.tip_at_start;
         // The tip lies at the silhouette's last section at that end (the measured sections
@@ -464,6 +484,7 @@ impl SilhouetteFinder {
             sum / count.max(1.0)
         };
         let (first, last) = (end_width(&mut self.mids.iter()), end_width(&mut self.mids.iter().rev()));
+        self.end_widths_px = [first, last];
         self.tip_at_start = first <= last;
         let limit = first.min(last) * 1.5 + 2.0;
         let run = |order: &mut dyn Iterator<Item = &[f64; 3]>| {
@@ -480,6 +501,21 @@ impl SilhouetteFinder {
         };
         let count = if self.tip_at_start { run(&mut self.mids.iter()) } else { run(&mut self.mids.iter().rev()) };
         (count >= MIN_FINGER_SECTIONS && count < n).then(|| if self.tip_at_start { 0..count } else { n - count..n })
+    }
+
+    /// The end at which the last sections ([`Self::fit_sections`]) run out of the image
+    /// (`Some(true)`: their start, lowest s), when only one end does: within the outer quarter
+    /// of the silhouette's extent along them.
+    fn border_end(&self) -> Option<bool> {
+        let filled = |i: &usize| self.lo[*i].is_finite();
+        let (first, last) = ((0..self.lo.len()).find(filled)?, (0..self.lo.len()).rev().find(filled)?);
+        let reach = (last - first) / 4;
+        let touches = |range: std::ops::RangeInclusive<usize>| self.border[range].iter().any(|&b| b);
+        match (touches(first..=first + reach), touches(last - reach..=last)) {
+            (true, false) => Some(true),
+            (false, true) => Some(false),
+            _ => None,
+        }
     }
 
     /// Fills `pixels` with the changed pixels that have enough changed neighbours.

@@ -311,10 +311,56 @@ fn views_whose_fingers_point_apart_are_refused_as_disagreeing() {
     let mut a = arm(&rig, target, 60.0, 50.0, 0.1);
     let mut tracker = PointingTracker::new(pointing(&rig), GestureConfig::default());
     assert!(matches!(run(&mut tracker, &[scene(23), scene(24)], |_| a, 12, 6), GestureState::Indicated(_)));
-    a[1] = [a[1][1], a[1][0]];
+    // Reversed: the narrow end drawn 40 % of the way to the elbow, so that the whole arm
+    // stays inside the image (an arm that runs out of the image has its tail there,
+    // whichever end is narrower).
+    let [tip, elbow] = a[1];
+    let far = [tip[0] + 0.4 * (elbow[0] - tip[0]), tip[1] + 0.4 * (elbow[1] - tip[1])];
+    assert!([tip, far].iter().all(|p| p[0] > 20.0 && p[1] > 20.0 && p[0] < W as f64 - 20.0 && p[1] < H as f64 - 20.0), "{tip:?} {far:?}");
+    a[1] = [far, tip];
     let mut tracker = PointingTracker::new(pointing(&rig), GestureConfig::default());
     match run(&mut tracker, &[scene(23), scene(24)], |_| a, 12, 6) {
         GestureState::Disagree { view, behind_px } => assert!(view == 1 && behind_px > 50.0, "view {view}, {behind_px} px behind"),
         other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_finger_cut_by_the_border_has_its_tip_inside_the_image() {
+    // Only the finger in view, the hand beyond the image border (seen from the side, a finger
+    // 10 px wide runs out of the image): both ends are as wide, and the width rule flipped the
+    // tip between the fingertip and the border from frame to frame on noise, so the hand
+    // never held "still" (point_clutter3 seed 57). The end that runs out of the image is the
+    // tail: the arm belongs to someone outside it.
+    let bg = scene(31);
+    let mut rng = SplitMix64::new(9);
+    for (tip, angle_deg) in [([200.0, 240.0], 200.0f64), ([420.0, 260.0], -15.0), ([300.0, 200.0], -80.0)] {
+        let u = [angle_deg.to_radians().cos(), angle_deg.to_radians().sin()];
+        let frame = with_parts(&bg, tip, u, &[(0.0, 600.0, 5.0)]);
+        let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+        for _ in 0..8 {
+            let axis = finder.find(&noisy(&bg, &mut rng).view(), &noisy(&frame, &mut rng).view()).unwrap_or_else(|e| panic!("{angle_deg}°: {e}"));
+            let off = |p: [f64; 2]| (p[0] - tip[0]).hypot(p[1] - tip[1]);
+            assert!(off(axis.tip_px) < 3.0 && off(axis.end_px) < 3.0, "{angle_deg}°: tip {:?}, end {:?}, drawn at {tip:?}", axis.tip_px, axis.end_px);
+        }
+    }
+}
+
+#[test]
+fn an_arm_whose_narrow_end_runs_out_of_the_image_has_no_fingertip_in_view() {
+    // A hand seen from the back, 60 px wide, on a 30 px forearm that runs out of the image, and
+    // no finger to be seen: the narrow end is the forearm's, at the border. The width rule
+    // alone put the tip there (a "finger" pointing out of the image, on the hand's midline);
+    // the arm is someone's from outside the image, so no fingertip is in view and no line.
+    let bg = scene(51);
+    let mut rng = SplitMix64::new(11);
+    for angle_deg in [-60.0f64, -120.0, 200.0] {
+        let u = [angle_deg.to_radians().cos(), angle_deg.to_radians().sin()];
+        let frame = with_parts(&bg, [320.0, 300.0], u, &[(0.0, 70.0, 30.0), (70.0, 700.0, 15.0)]);
+        let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+        match finder.find(&noisy(&bg, &mut rng).view(), &noisy(&frame, &mut rng).view()) {
+            Err(SilhouetteError::NarrowEndOutside { narrow_px, wide_px }) => assert!(narrow_px < wide_px, "{angle_deg}°: {narrow_px} vs {wide_px} px"),
+            other => panic!("{angle_deg}°: {other:?}"),
+        }
     }
 }
