@@ -160,9 +160,11 @@ impl PointingRecord {
 
     /// The plan found that the answered gesture's point picks no one block (`why`): it is
     /// recorded as `ambiguous`, and the point is forgotten until the next answer.
-    pub fn ambiguous(&mut self, why: String) {
+    /// The plan turned the newest answered gesture's point down (`outcome`: "ambiguous", a
+    /// point between blocks; "off_blocks", a point on none); the operator is asked again.
+    pub fn turned_down(&mut self, outcome: &str, why: String) {
         if let Some(g) = self.gestures.iter_mut().rev().find(|g| g.outcome == "indicated") {
-            g.outcome = "ambiguous".into();
+            g.outcome = outcome.into();
             g.detail = why;
         }
         self.indicated_m = None;

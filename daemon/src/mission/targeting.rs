@@ -63,6 +63,9 @@ pub struct Targeting {
     indicated_sigma_m: f64,
     /// Times the operator was asked to point again because the point did not pick one block.
     repoints: u32,
+    /// The last pointed point turned down for lying on no block the plan saw (x, y, m) and its
+    /// sigma, m: a second point there is a block the plan does not see, not a missed aim.
+    off_blocks_m: Option<([f64; 2], f64)>,
     /// The plan's other grasp sites near the indicated point, next best first: tried in turn
     /// when the target trackers cannot hold the chosen facet or it turns out not vertical.
     alternatives: Vec<TargetSpec>,
@@ -170,6 +173,20 @@ impl Targeting {
         true
     }
 
+    /// Records the indicated point as lying on no block the plan saw (before asking again);
+    /// returns how far it lies from the one recorded before, m, when that is within the two
+    /// points' error (3 sigma of both, at least 20 mm): the operator points at the same place
+    /// again, so the plan does not see the block there.
+    pub fn off_blocks_again(&mut self) -> Option<f64> {
+        let point = self.indicated_m?;
+        let (p, sigma) = ([point[0], point[1]], self.indicated_sigma_m);
+        let before = self.off_blocks_m.replace((p, sigma));
+        before.and_then(|(q, s)| {
+            let apart_m = (p[0] - q[0]).hypot(p[1] - q[1]);
+            (apart_m <= (3.0 * sigma.hypot(s)).max(0.02)).then_some(apart_m)
+        })
+    }
+
     pub fn repoints(&self) -> u32 {
         self.repoints
     }
@@ -247,4 +264,22 @@ mod tests {
         assert!(!t.point_again(2), "the third ambiguous point ends the run");
         assert_eq!(t.indicated_m(), Some([0.3, 0.01, 0.06]));
     }
+
+    #[test]
+    fn a_second_point_on_no_block_at_the_same_place_is_told_from_a_missed_aim() {
+        let mut t = Targeting::default();
+        t.set_pointed_m([0.30, 0.10, 0.06], 0.005);
+        assert_eq!(t.off_blocks_again(), None, "the first is a missed aim: ask again");
+        assert!(t.point_again(2));
+        // Pointed again 40 mm away (sigmas 5 and 4 mm: 3 sigma of both is 19 mm, the floor 20):
+        // another missed aim.
+        t.set_pointed_m([0.34, 0.10, 0.06], 0.004);
+        assert_eq!(t.off_blocks_again(), None);
+        assert!(t.point_again(2));
+        // Then 12 mm from that one: the same place twice, a block the plan does not see.
+        t.set_pointed_m([0.34, 0.112, 0.06], 0.004);
+        let apart = t.off_blocks_again().expect("the same place");
+        assert!((apart - 0.012).abs() < 1e-9, "{apart}");
+    }
+
 }

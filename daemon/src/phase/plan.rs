@@ -22,7 +22,7 @@ use super::job::PendingJob;
 use super::step::{timed_out, Cmd, Cycle, MovePoll, MoveWait, Step};
 use crate::gripper::tool_from_reference;
 use crate::mission::{Mission, PlanningStats, TargetSource, TargetSpec};
-use crate::planning::{plan_request, PlanCalibration, PlanMoment, PlanOutput, PlannedTarget};
+use crate::planning::{nearest_facet_distance_m, plan_request, PlanCalibration, PlanMoment, PlanOutput, PlannedTarget};
 
 /// Times a pointed point that picks no one block sends the operator back to point before the
 /// run fails: each answer is a new gesture from wherever the operator stands.
@@ -261,7 +261,7 @@ impl PlanPhase {
                     // A pointed point between blocks: the operator is asked to point again
                     // (the dispatcher goes back to the point phase when the point is gone).
                     if let Some(why) = ambiguous {
-                        m.pointing.ambiguous(why.clone());
+                        m.pointing.turned_down("ambiguous", why.clone());
                         if m.targeting.point_again(MAX_REPOINTS) {
                             tracing::warn!(%why, "plan: asking the operator to point again");
                             m.reporting.set_status("plan: the point does not pick one block; point again");
@@ -315,12 +315,37 @@ impl PlanPhase {
                             "plan: no grasp site: what was seen of the pointed block does not settle whether it can be grasped ({seen}); not a refusal{looks}"
                         ));
                     }
-                    if let (Some(nearest), Some(_)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
-                        return Step::fail(FailureKind::NoGraspSite, format!(
-                            "plan: no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away){looks}",
-                            m.cfg.plan.grasp.max_site_distance_m * 1e3,
+                    if let (Some(nearest), Some(point)) = (summary.sites.candidates.first(), m.targeting.indicated_m()) {
+                        let reach_m = m.cfg.plan.grasp.max_site_distance_m;
+                        let why = format!(
+                            "no grasp site within {:.0} mm of the indicated point (the nearest is {:.0} mm away){looks}",
+                            reach_m * 1e3,
                             nearest.place.distance_mm.unwrap_or(f64::NAN)
-                        ));
+                        );
+                        // A pointed point that lies on no block the plan saw either (a finger
+                        // line read off the finger: 60-100 mm off on point_clutter3 seeds 47,
+                        // 51) is the operator's to give again, as a point between blocks is. One
+                        // on or next to a block whose sites all failed is the plan's failure.
+                        let off_blocks = nearest_facet_distance_m(&summary.scene.facets, [point[0], point[1]]).is_none_or(|d| d > reach_m);
+                        if off_blocks && m.targeting.indicated_sigma_m() > 0.0 {
+                            let why = format!("the point lies on no block: no facet within {:.0} mm of it, and {why}", reach_m * 1e3);
+                            m.pointing.turned_down("off_blocks", why.clone());
+                            // The same place pointed at again: a block there the plan does not
+                            // see (its failure), not a missed aim.
+                            if let Some(apart_m) = m.targeting.off_blocks_again() {
+                                return Step::fail(FailureKind::NoGraspSite, format!(
+                                    "plan: {why}; pointed at the same place again ({:.0} mm from the last point), so the plan does not see the block there",
+                                    apart_m * 1e3
+                                ));
+                            }
+                            if m.targeting.point_again(MAX_REPOINTS) {
+                                tracing::warn!(%why, "plan: asking the operator to point again");
+                                m.reporting.set_status("plan: the point lies on no block; point again");
+                                return Step::Next(Cmd::HOLD);
+                            }
+                            return Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()));
+                        }
+                        return Step::fail(FailureKind::NoGraspSite, format!("plan: {why}"));
                     }
                     let reasons: Vec<String> = summary.sites.rejected_by_reason.iter().map(|(k, v)| format!("{k} {v}")).collect();
                     return Step::fail(FailureKind::NoGraspSite, format!(

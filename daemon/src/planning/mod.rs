@@ -324,6 +324,24 @@ pub fn point_ambiguity(chosen_m: f64, others_m: impl Iterator<Item = f64>, sigma
     })
 }
 
+/// How far the point `point_m` (robot x, y) lies on the working plane from the nearest facet
+/// the plan saw: from its outline seen from above (its corners' x, y: a vertical face's is a
+/// line), 0 inside a top face's, m; `None` when no facet has corners.
+pub fn nearest_facet_distance_m(facets: &[FacetSummary], point_m: [f64; 2]) -> Option<f64> {
+    facets
+        .iter()
+        .filter_map(|f| f.corners_m.as_ref())
+        .filter(|c| !c.is_empty())
+        .map(|c| {
+            let xy: Vec<[f64; 2]> = c.iter().map(|p| [p[0], p[1]]).collect();
+            if geom::contains(&xy, point_m, 0.0) {
+                return 0.0;
+            }
+            (0..xy.len()).map(|i| geom::point_segment_distance(point_m, xy[i], xy[(i + 1) % xy.len()])).fold(f64::INFINITY, f64::min)
+        })
+        .reduce(f64::min)
+}
+
 /// A short name for a rejection reason.
 pub fn reason_name(r: &RejectReason) -> &'static str {
     match r {
@@ -903,6 +921,19 @@ mod tests {
         assert!(why.contains("only 40 mm farther (60 against 20 mm)") && why.contains("7.0 mm"), "{why}");
         // No site on another object: nothing to confuse it with.
         assert_eq!(point_ambiguity(20e-3, std::iter::empty(), 50e-3, 3.0), None);
+    }
+
+    #[test]
+    fn a_point_is_measured_to_the_nearest_facet_seen_from_above() {
+        let facet = |corners: Vec<[f64; 3]>| FacetSummary { plan_facet: 0, left_px: vec![], right_px: vec![], corners_m: Some(corners), component: None, hypothesised: false };
+        // A 40 mm top face at (0.40..0.44, 0..0.04) and a vertical face along x = 0.30.
+        let top = facet(vec![[0.40, 0.0, 0.1], [0.44, 0.0, 0.1], [0.44, 0.04, 0.1], [0.40, 0.04, 0.1]]);
+        let side = facet(vec![[0.30, -0.02, 0.06], [0.30, 0.02, 0.06], [0.30, 0.02, 0.1], [0.30, -0.02, 0.1]]);
+        let near = |p: [f64; 2]| nearest_facet_distance_m(&[top.clone(), side.clone()], p).unwrap();
+        assert_eq!(near([0.42, 0.02]), 0.0, "inside the top face");
+        assert!((near([0.50, 0.02]) - 0.06).abs() < 1e-12, "60 mm beside the top face: {}", near([0.50, 0.02]));
+        assert!((near([0.33, 0.0]) - 0.03).abs() < 1e-12, "30 mm in front of the side face: {}", near([0.33, 0.0]));
+        assert_eq!(nearest_facet_distance_m(&[facet(vec![])], [0.0, 0.0]), None);
     }
 
     #[test]
