@@ -262,12 +262,7 @@ impl PlanPhase {
                     // (the dispatcher goes back to the point phase when the point is gone).
                     if let Some(why) = ambiguous {
                         m.pointing.turned_down("ambiguous", why.clone());
-                        if m.targeting.point_again(MAX_REPOINTS) {
-                            tracing::warn!(%why, "plan: asking the operator to point again");
-                            m.reporting.set_status("plan: the point does not pick one block; point again");
-                            return Step::Next(Cmd::HOLD);
-                        }
-                        return Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()));
+                        return point_again(m, &why, "plan: the point does not pick one block; point again");
                     }
                     // A refusal names the rules the pointed block fails, from this plan's own
                     // facets, so that the user can tell a right refusal from a blind one. It is
@@ -338,12 +333,7 @@ impl PlanPhase {
                                     apart_m * 1e3
                                 ));
                             }
-                            if m.targeting.point_again(MAX_REPOINTS) {
-                                tracing::warn!(%why, "plan: asking the operator to point again");
-                                m.reporting.set_status("plan: the point lies on no block; point again");
-                                return Step::Next(Cmd::HOLD);
-                            }
-                            return Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()));
+                            return point_again(m, &why, "plan: the point lies on no block; point again");
                         }
                         return Step::fail(FailureKind::NoGraspSite, format!("plan: {why}"));
                     }
@@ -367,6 +357,18 @@ impl PlanPhase {
 /// heights come from the affine model extrapolated 10-15 cm below the cage of reference
 /// points, and came out ~2 cm high on 30-40 mm blocks (fingers closing above a bar). The
 /// plan's width sets how far the jaws go past the facet.
+/// Asks the operator to point again (the dispatcher goes back to the point phase once the
+/// point is forgotten), or fails after `MAX_REPOINTS` such requests; `why` the plan turned the
+/// point down.
+fn point_again(m: &mut Mission, why: &str, status: &str) -> Step {
+    if m.targeting.point_again(MAX_REPOINTS) {
+        tracing::warn!(%why, "plan: asking the operator to point again");
+        m.reporting.set_status(status);
+        return Step::Next(Cmd::HOLD);
+    }
+    Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()))
+}
+
 fn target_spec(t: &PlannedTarget) -> TargetSpec {
     TargetSpec {
         source: TargetSource::Plan,

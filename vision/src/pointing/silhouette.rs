@@ -100,8 +100,6 @@ pub struct SilhouetteFinder {
     keep: Vec<bool>,
     /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
     tip_at_start: bool,
-    /// The mean widths of the last fit's five sections at its start and at its end, px.
-    end_widths_px: [f64; 2],
     finger: FingerFinder,
     /// The finger part's pixels when the last axis came from it (else empty).
     finger_pixels: Vec<(u16, u16)>,
@@ -286,7 +284,7 @@ impl SilhouetteFinder {
             // resolved at the other end, and the midline is the hand's, not the finger's (on
             // point_clutter3 seed 60's second gesture such a line pointed 130 mm off): no line
             // from the whole silhouette; the finger as a part of its own may still give one.
-            let [first, last] = self.end_widths_px;
+            let [first, last] = self.end_widths_px();
             let (narrow, wide) = if tail_at_start { (first, last) } else { (last, first) };
             if narrow + 2.0 * self.config.max_width_step_px < wide {
                 return Err(SilhouetteError::NarrowEndOutside { narrow_px: narrow.round() as u32, wide_px: wide.round() as u32 });
@@ -297,13 +295,11 @@ impl SilhouetteFinder {
         // The tip lies at the silhouette's last section at that end (the measured sections
         // stop short of it, at the fingertip's end face).
         let offset = self.lo.len() as f64 / 2.0;
-        let filled = |i: &usize| self.lo[*i].is_finite();
-        let (first, last) = ((0..self.lo.len()).find(filled), (0..self.lo.len()).rev().find(filled));
-        let (s_tip, s_tail) = match (tip_at_start, first, last) {
-            (true, Some(i), _) => (i as f64 - offset, fit.s_max),
-            (false, _, Some(i)) => (i as f64 - offset, fit.s_min),
-            (true, None, _) => (fit.s_min, fit.s_max),
-            (false, _, None) => (fit.s_max, fit.s_min),
+        let (s_tip, s_tail) = match (tip_at_start, self.filled_bins()) {
+            (true, Some((first, _))) => (first as f64 - offset, fit.s_max),
+            (false, Some((_, last))) => (last as f64 - offset, fit.s_min),
+            (true, None) => (fit.s_min, fit.s_max),
+            (false, None) => (fit.s_max, fit.s_min),
         };
         let end_px = self.extreme_px([cx, cy], [ex, ey], tip_at_start);
         Ok(ArmAxis {
@@ -479,12 +475,7 @@ impl SilhouetteFinder {
     /// behind the robot.
     fn finger_sections(&mut self) -> Option<std::ops::Range<usize>> {
         let n = self.mids.len();
-        let end_width = |it: &mut dyn Iterator<Item = &[f64; 3]>| {
-            let (sum, count) = it.take(5).fold((0.0f64, 0.0f64), |(s, c), m| (s + m[2], c + 1.0));
-            sum / count.max(1.0)
-        };
-        let (first, last) = (end_width(&mut self.mids.iter()), end_width(&mut self.mids.iter().rev()));
-        self.end_widths_px = [first, last];
+        let [first, last] = self.end_widths_px();
         self.tip_at_start = first <= last;
         let limit = first.min(last) * 1.5 + 2.0;
         let run = |order: &mut dyn Iterator<Item = &[f64; 3]>| {
@@ -503,12 +494,26 @@ impl SilhouetteFinder {
         (count >= MIN_FINGER_SECTIONS && count < n).then(|| if self.tip_at_start { 0..count } else { n - count..n })
     }
 
+    /// The mean widths of the last fit's (`mids`) five sections at its start and at its end, px.
+    fn end_widths_px(&self) -> [f64; 2] {
+        let mean = |it: &mut dyn Iterator<Item = &[f64; 3]>| {
+            let (sum, count) = it.take(5).fold((0.0f64, 0.0f64), |(s, c), m| (s + m[2], c + 1.0));
+            sum / count.max(1.0)
+        };
+        [mean(&mut self.mids.iter()), mean(&mut self.mids.iter().rev())]
+    }
+
+    /// The first and the last cross-section bin of the last sections that hold a pixel.
+    fn filled_bins(&self) -> Option<(usize, usize)> {
+        let filled = |i: &usize| self.lo[*i].is_finite();
+        Some(((0..self.lo.len()).find(filled)?, (0..self.lo.len()).rev().find(filled)?))
+    }
+
     /// The end at which the last sections ([`Self::fit_sections`]) run out of the image
     /// (`Some(true)`: their start, lowest s), when only one end does: within the outer quarter
     /// of the silhouette's extent along them.
     fn border_end(&self) -> Option<bool> {
-        let filled = |i: &usize| self.lo[*i].is_finite();
-        let (first, last) = ((0..self.lo.len()).find(filled)?, (0..self.lo.len()).rev().find(filled)?);
+        let (first, last) = self.filled_bins()?;
         let reach = (last - first) / 4;
         let touches = |range: std::ops::RangeInclusive<usize>| self.border[range].iter().any(|&b| b);
         match (touches(first..=first + reach), touches(last - reach..=last)) {
