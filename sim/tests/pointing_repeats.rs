@@ -6,7 +6,9 @@
 //! `HANDEYE_POINTING_DEBUG` (default `/tmp/handeye-pointing`), each gesture's frame mid-hold,
 //! its background and the frame with the finger part marked (`sSgK*.pgm`). A diagnosis tool,
 //! not an acceptance test (that is `pointing_sim`): run with
-//! `cargo test -p handeye-sim --test pointing_repeats -- --ignored --nocapture`.
+//! `cargo test -p handeye-sim --test pointing_repeats -- --ignored --nocapture`. With
+//! `HANDEYE_POINTING_TRACE` set, it also prints each frame's axis in both views (tip, the
+//! silhouette's end, centroid, pixels, sections, finger part) and the gesture's state.
 use std::path::Path;
 
 use handeye_sim::render::Renderer;
@@ -35,6 +37,8 @@ fn every_gesture_of_the_seeds() {
     let base = Scenario::parse(SCENARIO, Path::new("point_clutter3.toml")).unwrap();
     let mut renderer: Option<Renderer> = None;
     let mut tally = (0, 0);
+    let trace = std::env::var("HANDEYE_POINTING_TRACE").is_ok();
+    let mut trace_finder = SilhouetteFinder::new(Default::default());
     for seed in seeds {
         let mut scenario = base.clone();
         assert!(scenario.randomise_layout(seed));
@@ -87,6 +91,22 @@ fn every_gesture_of_the_seeds() {
                 }
                 let [l, r] = views(&gray, w, h);
                 state = tracker.update(&l, &r);
+                if trace {
+                    let [bl, br] = views(&bg, w, h);
+                    let f = |a: Result<handeye_vision::pointing::ArmAxis, _>, finder: &SilhouetteFinder| match a {
+                        Ok(a) => format!(
+                            "tip ({:.0},{:.0}) end ({:.0},{:.0}) cen ({:.1},{:.1}) n{} s{} part{}",
+                            a.tip_px[0], a.tip_px[1], a.end_px[0], a.end_px[1], a.centroid_px[0], a.centroid_px[1], a.pixels, a.sections,
+                            finder.finger_part_pixels().len()
+                        ),
+                        Err(e) => format!("{e:?}"),
+                    };
+                    let al = trace_finder.find(&bl, &l);
+                    let sl = f(al, &trace_finder);
+                    let ar = trace_finder.find(&br, &r);
+                    let sr = f(ar, &trace_finder);
+                    eprintln!("   t {:.2} L {sl} | R {sr} -> {}", t(&sim), match state { GestureState::Moving { .. } => "moving".to_string(), s => format!("{s:?}").chars().take(40).collect() });
+                }
                 match state {
                     GestureState::Indicated(_) => break,
                     GestureState::Degenerate { .. } | GestureState::Uncertain { .. } | GestureState::Disagree { .. } => {
