@@ -33,9 +33,23 @@ pub(super) struct FingerPart {
     pub width_px: f64,
 }
 
-/// Reusable buffers.
+/// The opening's disk holds over this many frames: its radius is the largest of theirs.
+const HOLD_FRAMES: usize = 10;
+
+/// Reusable buffers, and the disk radii of the last frames.
 #[derive(Debug, Clone, Default)]
 pub(super) struct FingerFinder {
+    /// The widest part's radius in the last [`HOLD_FRAMES`] frames (a ring), chamfer units.
+    /// A hand held still has one width, but the silhouette's widest part does not: where the
+    /// forearm is lost against the scene in some frames and not in others, the widest half
+    /// width jumped 27 to 29 px, and a finger about as wide as the disk came and went as a
+    /// protrusion with it (point_clutter3 seed 60: the part flipped between the finger and the
+    /// hand's side face, and the hand never held "still"). The largest recent width is the
+    /// hand's own; noise and the scene only take pixels away from it.
+    radii: Vec<u32>,
+    next_radius: usize,
+    /// Whether this frame's radius is in `radii` already (the finder runs up to twice a frame).
+    radius_held: bool,
     /// Per cell of the box: 0 outside, 1 inside, 2 opened (the hand and forearm), 3 residual.
     cell: Vec<u8>,
     dist: Vec<u32>,
@@ -65,6 +79,18 @@ impl Component {
 }
 
 impl FingerFinder {
+    /// A new frame: its first [`find`](Self::find) adds its radius to the held ones.
+    pub fn next_frame(&mut self) {
+        self.radius_held = false;
+    }
+
+    /// The arm has gone: the next one's width is its own.
+    pub fn forget(&mut self) {
+        self.radii.clear();
+        self.next_radius = 0;
+        self.radius_held = false;
+    }
+
     /// The finger part of the silhouette `pixels` of a `w` x `h` image, its pixels in `out`:
     /// the largest thin protrusion (elongated at least `min_elongation`, at least
     /// `min_length_px` long, joined to the wide part at one end) that does not touch the image
@@ -121,7 +147,7 @@ impl FingerFinder {
             .map(|(d, _)| *d)
             .max()
             .unwrap_or(0);
-        let radius = widest * 55 / 100;
+        let radius = self.held_radius(widest * 55 / 100);
         if radius < 4 * SIDE {
             return None;
         }
@@ -185,6 +211,20 @@ impl FingerFinder {
             length_px,
             width_px,
         })
+    }
+
+    /// The largest of this frame's radius (`now`, held once a frame) and the last frames'.
+    fn held_radius(&mut self, now: u32) -> u32 {
+        if !self.radius_held {
+            self.radius_held = true;
+            if self.radii.len() < HOLD_FRAMES {
+                self.radii.push(now);
+            } else {
+                self.radii[self.next_radius] = now;
+            }
+            self.next_radius = (self.next_radius + 1) % HOLD_FRAMES;
+        }
+        self.radii.iter().copied().fold(now, u32::max)
     }
 
     /// Background cells not reachable from the box's edge become inside.
@@ -341,4 +381,45 @@ fn shape(c: &Component) -> Option<(f64, f64, f64)> {
     );
     let (length, width) = ((12.0 * l1).sqrt(), (12.0 * l2).sqrt());
     Some((length, width, length / width))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An upright hand seen from the front, `half_width_px` either side of x = 200 over y
+    /// 150-250, and its finger, 14 px either side, over y 250-320.
+    fn hand(half_width_px: u16) -> Vec<(u16, u16)> {
+        let mut px = Vec::new();
+        for y in 150..320u16 {
+            let half = if y < 250 { half_width_px } else { 14 };
+            px.extend((200 - half..=200 + half).map(|x| (x, y)));
+        }
+        px
+    }
+
+    #[test]
+    fn a_finger_stays_a_part_while_the_hand_looks_narrower_for_a_frame() {
+        let mut out = Vec::new();
+        let find = |f: &mut FingerFinder, half: u16, out: &mut Vec<(u16, u16)>| {
+            f.next_frame();
+            f.find(&hand(half), 640, 480, 1.5, 20.0, out)
+        };
+        // A hand 48 px wide alone: its disk (0.55 of its half width) fits the 29 px finger,
+        // so the opening keeps the finger and there is no part.
+        let mut alone = FingerFinder::default();
+        assert_eq!(find(&mut alone, 24, &mut out), None);
+        // The same hand a frame after it was seen 60 px wide (the silhouette's widest part
+        // came and went with the scene behind it): the disk holds, the finger stays a part.
+        let mut held = FingerFinder::default();
+        let wide = find(&mut held, 30, &mut out).expect("the finger of the wide hand");
+        let narrow = find(&mut held, 24, &mut out).expect("the finger, the disk held");
+        for part in [wide, narrow] {
+            assert!((part.root_px[0] - 200.0).abs() < 2.0 && part.root_px[1] > 245.0 && part.root_px[1] < 270.0, "{part:?}");
+            assert!((part.width_px - 29.0).abs() < 3.0, "{part:?}");
+        }
+        // Once the arm has gone, the next hand's width is its own.
+        held.forget();
+        assert_eq!(find(&mut held, 24, &mut out), None);
+    }
 }

@@ -57,9 +57,9 @@ pub struct ArmAxis {
     /// Centroid of the changed pixels (how the whole arm moves), pixels.
     pub centroid_px: [f64; 2],
     /// The silhouette's own end at the tip: the mean of its changed pixels within 2 px of its
-    /// extreme along the axis, pixels. Unlike `tip_px` (on the fitted line), it does not move
-    /// when the fit changes its mind between the finger's and the whole arm's midline from
-    /// one frame to the next: it says whether the hand moved.
+    /// extreme along their principal direction, pixels. Unlike `tip_px` (on the fitted line),
+    /// it does not move when the fit changes its mind between the finger's and the whole arm's
+    /// midline from one frame to the next: it says whether the hand moved.
     pub end_px: [f64; 2],
     /// Changed pixels in the silhouette.
     pub pixels: usize,
@@ -96,6 +96,8 @@ pub struct SilhouetteFinder {
     lo: Vec<f32>,
     hi: Vec<f32>,
     border: Vec<bool>,
+    /// Per section: it reaches within [`TAIL_BORDER_PX`] of the image border.
+    near_border: Vec<bool>,
     mids: Vec<[f64; 3]>,
     keep: Vec<bool>,
     /// The narrow end (the fingertip) is at the start of `mids` (lowest s).
@@ -107,6 +109,13 @@ pub struct SilhouetteFinder {
 
 /// Sections on each side of a section that must have its width for it to count, 1 px each.
 const STEP_REACH: usize = 3;
+/// An end of the silhouette this close to the image border runs out of the image, px. Not
+/// only the pixels on it: a sleeve nearly the scene's grey changes only some of its pixels,
+/// and which of them reach the border's row differs from frame to frame (point_clutter3
+/// seed 64's first gesture: the sleeve's end 0-6 px from the border, and the tip flipped to
+/// it whenever none was on it).
+const TAIL_BORDER_PX: u16 = 8;
+
 /// The finger alone gives the line when this many of its sections are clean.
 const MIN_FINGER_SECTIONS: usize = 15;
 /// A finger found as a part of its own ([`FingerFinder`]) is at least this many times longer
@@ -148,8 +157,10 @@ impl SilhouetteFinder {
         self.finger_pixels.clear();
         let n = self.pixels.len();
         if n < self.config.min_pixels {
+            self.finger.forget();
             return Err(SilhouetteError::NothingThere { pixels: n });
         }
+        self.finger.next_frame();
         let (sx, sy) = self.pixels.iter().fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + f64::from(x), sy + f64::from(y)));
         let centroid_px = [sx / n as f64, sy / n as f64];
         // The whole silhouette's midline; failing that (a blob: the hand seen from the front,
@@ -252,6 +263,7 @@ impl SilhouetteFinder {
     fn axis_along(&mut self, background: &ImageView, c: [f64; 2], e: [f64; 2], root_px: Option<[f64; 2]>) -> Result<ArmAxis, SilhouetteError> {
         // Sections across the principal direction first, then again across the line that
         // fit found (a short, cut-off silhouette's principal direction can be well off).
+        let (c0, e0) = (c, e);
         let (mut c, mut e) = (c, e);
         let mut fit = self.fit_sections(background, c, e)?;
         for _ in 0..2 {
@@ -301,7 +313,13 @@ impl SilhouetteFinder {
             (true, None) => (fit.s_min, fit.s_max),
             (false, None) => (fit.s_max, fit.s_min),
         };
-        let end_px = self.extreme_px([cx, cy], [ex, ey], tip_at_start);
+        // The silhouette's end along the pixels' own principal direction, not the fitted
+        // line's: a fingertip's end face is blunt, and where the fit turned a few degrees
+        // between the finger's and the whole arm's midline from frame to frame, the extreme
+        // along the fit jumped between the face's corners (8-10 px on point_clutter3 seed 31's
+        // first gesture, which never held "still").
+        let same_way = e0[0] * ex + e0[1] * ey >= 0.0;
+        let end_px = self.extreme_px(c0, e0, tip_at_start == same_way);
         Ok(ArmAxis {
             end_px,
             line,
@@ -348,6 +366,9 @@ impl SilhouetteFinder {
         self.hi.resize(span, f32::NEG_INFINITY);
         self.border.clear();
         self.border.resize(span, false);
+        self.near_border.clear();
+        self.near_border.resize(span, false);
+        let m = TAIL_BORDER_PX;
         for &(x, y) in &self.pixels {
             let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
             let s = ((dx * ex + dy * ey) + offset).round() as usize;
@@ -357,6 +378,9 @@ impl SilhouetteFinder {
                 self.hi[s] = self.hi[s].max(t);
                 if x <= 1 || y <= 1 || usize::from(x) + 2 >= w || usize::from(y) + 2 >= h {
                     self.border[s] = true;
+                }
+                if x < m || y < m || usize::from(x) + usize::from(m) >= w || usize::from(y) + usize::from(m) >= h {
+                    self.near_border[s] = true;
                 }
             }
         }
@@ -510,12 +534,13 @@ impl SilhouetteFinder {
     }
 
     /// The end at which the last sections ([`Self::fit_sections`]) run out of the image
-    /// (`Some(true)`: their start, lowest s), when only one end does: within the outer quarter
-    /// of the silhouette's extent along them.
+    /// (`Some(true)`: their start, lowest s), when only one end does: reach within
+    /// [`TAIL_BORDER_PX`] of the border in the outer quarter of the silhouette's extent along
+    /// them.
     fn border_end(&self) -> Option<bool> {
         let (first, last) = self.filled_bins()?;
         let reach = (last - first) / 4;
-        let touches = |range: std::ops::RangeInclusive<usize>| self.border[range].iter().any(|&b| b);
+        let touches = |range: std::ops::RangeInclusive<usize>| self.near_border[range].iter().any(|&b| b);
         match (touches(first..=first + reach), touches(last - reach..=last)) {
             (true, false) => Some(true),
             (false, true) => Some(false),

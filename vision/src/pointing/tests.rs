@@ -347,6 +347,31 @@ fn a_finger_cut_by_the_border_has_its_tip_inside_the_image() {
 }
 
 #[test]
+fn a_finger_that_fades_out_just_short_of_the_border_has_its_tip_inside_the_image() {
+    // As above, but the silhouette stops 5 px short of the border (a sleeve nearly the
+    // scene's grey changes only some of its pixels; point_clutter3 seed 64): no pixel on the
+    // border, and the width rule flipped the tip to the end at the border. An end that close
+    // to the border runs out of the image.
+    let bg = scene(32);
+    let mut rng = SplitMix64::new(10);
+    for (tip, angle_deg) in [([200.0, 240.0], 180.0f64), ([420.0, 260.0], 0.0), ([300.0, 200.0], -90.0)] {
+        let u = [angle_deg.to_radians().cos(), angle_deg.to_radians().sin()];
+        // Along u from the tip to the border, less 5 px.
+        let to_border = [(-tip[0] / u[0]), ((W as f64 - 1.0 - tip[0]) / u[0]), (-tip[1] / u[1]), ((H as f64 - 1.0 - tip[1]) / u[1])]
+            .into_iter()
+            .filter(|d| d.is_finite() && *d > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let frame = with_parts(&bg, tip, u, &[(0.0, to_border - 5.0, 5.0)]);
+        let mut finder = SilhouetteFinder::new(SilhouetteConfig::default());
+        for _ in 0..8 {
+            let axis = finder.find(&noisy(&bg, &mut rng).view(), &noisy(&frame, &mut rng).view()).unwrap_or_else(|e| panic!("{angle_deg}°: {e}"));
+            let off = |p: [f64; 2]| (p[0] - tip[0]).hypot(p[1] - tip[1]);
+            assert!(off(axis.tip_px) < 3.0 && off(axis.end_px) < 3.0, "{angle_deg}°: tip {:?}, end {:?}, drawn at {tip:?}", axis.tip_px, axis.end_px);
+        }
+    }
+}
+
+#[test]
 fn an_arm_whose_narrow_end_runs_out_of_the_image_has_no_fingertip_in_view() {
     // A hand seen from the back, 60 px wide, on a 30 px forearm that runs out of the image, and
     // no finger to be seen: the narrow end is the forearm's, at the border. The width rule
