@@ -200,6 +200,8 @@ fn every_gesture_of_the_seeds() {
                         let l = p.axes[v].line.0;
                         l[0] * q[0] + l[1] * q[1] + l[2]
                     };
+                    let end_off = |v: usize| off(v, p.axes[v].end_px);
+                    eprintln!("  end off the line L {:.1} R {:.1} px; sections L {} R {}", end_off(0), end_off(1), p.axes[0].sections, p.axes[1].sections);
                     eprintln!(
                         "  -> {:.1} mm off, sigma {:.1} mm, crossing {:.0}°; lines off tip/aim L {:.1}/{:.1} R {:.1}/{:.1}",
                         (p.point_m[0] - aim.x).hypot(p.point_m[1] - aim.y) * 1e3,
