@@ -352,11 +352,6 @@ impl PlanPhase {
     }
 }
 
-/// The target for the later phases. The grasp goes down to the configured height above the
-/// table (the robot's own kinematics are exact), not to the plan's low-water mark: the plan's
-/// heights come from the affine model extrapolated 10-15 cm below the cage of reference
-/// points, and came out ~2 cm high on 30-40 mm blocks (fingers closing above a bar). The
-/// plan's width sets how far the jaws go past the facet.
 /// Asks the operator to point again (the dispatcher goes back to the point phase once the
 /// point is forgotten), or fails after `MAX_REPOINTS` such requests; `why` the plan turned the
 /// point down.
@@ -369,6 +364,11 @@ fn point_again(m: &mut Mission, why: &str, status: &str) -> Step {
     Step::fail(FailureKind::NoGraspSite, format!("plan: {why} (asked to point again {} times)", m.targeting.repoints()))
 }
 
+/// The target for the later phases. The grasp goes down to the configured height above the
+/// table (the robot's own kinematics are exact), not to the plan's low-water mark: the plan's
+/// heights come from the affine model extrapolated 10-15 cm below the cage of reference
+/// points, and came out ~2 cm high on 30-40 mm blocks (fingers closing above a bar). The
+/// plan's width sets how far the jaws go past the facet.
 fn target_spec(t: &PlannedTarget) -> TargetSpec {
     TargetSpec {
         source: TargetSource::Plan,
