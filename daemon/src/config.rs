@@ -385,10 +385,11 @@ pub struct PlanGraspRules {
     /// centre), or the block the operator meant has no grasp site and the plan fails (rather
     /// than grasp another block), m.
     pub max_site_distance_m: f64,
-    /// A *pointed* point picks the block of the nearest site only if the nearest site on
-    /// another object is farther by twice this many of the point's sigmas (the point may be
-    /// this many sigmas off: it has missed by up to three on rendered gestures); else the
-    /// operator is asked to point again. A point given as a coordinate is never questioned.
+    /// A *pointed* point picks the block of the nearest site only if it lies this many of
+    /// its sigmas from the bisector between that site and each site on another object (the
+    /// point may be this many sigmas off: it has missed by up to three on rendered gestures);
+    /// else the operator is asked to point again. A point given as a coordinate is never
+    /// questioned.
     pub point_ambiguity_sigmas: f64,
 }
 

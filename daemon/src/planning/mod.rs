@@ -303,22 +303,51 @@ pub struct PlanOutput {
     pub ambiguous: Option<String>,
 }
 
-/// Why a pointed point with one-sigma radius `sigma_m` does not pick the block of the chosen
-/// site, `chosen_m` from it (plan view, m), given the distances of the sites on other
-/// objects; `None`: it picks one (always for a point given as a coordinate, `sigma_m` 0).
-/// The point may be `sigmas` sigmas off, `r`; moving it by `r` changes each distance by at
-/// most `r`, so the nearest other site must be `2 r` farther for no such point to prefer it.
-/// Three sigmas by default, not one: on rendered gestures the point has missed by up to three
-/// times its sigma where a finger's line was biased (BENCHMARKS.md, Pointing).
-pub fn point_ambiguity(chosen_m: f64, others_m: impl Iterator<Item = f64>, sigma_m: f64, sigmas: f64) -> Option<String> {
-    let other_m = others_m.fold(f64::INFINITY, f64::min);
-    let margin_m = other_m - chosen_m;
-    (sigma_m > 0.0 && margin_m < 2.0 * sigmas * sigma_m).then(|| {
+/// Why a pointed point `point_m` with one-sigma radius `sigma_m` does not pick the block of
+/// the chosen site at `chosen_m`, given the sites on other objects (plan view, robot x, y,
+/// m); `None`: it picks one (always for a point given as a coordinate, `sigma_m` 0).
+///
+/// The points nearer the chosen site than an other site `o` form a half-plane bounded by the
+/// two sites' perpendicular bisector, which lies `(|p - o|² - |p - c|²) / (2 |o - c|)` from
+/// the point. The point picks the block when every such bisector is `sigmas` sigmas away:
+/// only an error that large, and towards that site, would make another block's site the
+/// nearer. (The bound that each distance may change by the whole error, so that the other
+/// site must be twice that farther, holds only when the two sites lie on opposite sides of
+/// the point; it asked a point 47 mm from its L-block's site and 112 mm from a cube's, 13 mm
+/// sigma, to point again, with the bisector 43 mm away.) Three sigmas by default, not one:
+/// on rendered gestures the point has missed by up to three times its sigma where a finger's
+/// line was biased (BENCHMARKS.md, Pointing).
+///
+/// ```
+/// use handeye_daemon::planning::point_ambiguity;
+/// // The chosen site 20 mm to one side of the point, another block's 60 mm to the other:
+/// // the bisector lies 20 mm off, under three sigmas of 7 mm.
+/// assert!(point_ambiguity([0.0, 0.0], [-0.02, 0.0], [[0.06, 0.0]].into_iter(), 0.007, 3.0).is_some());
+/// // The same distances, the other site at right angles: its bisector lies 25 mm off.
+/// assert!(point_ambiguity([0.0, 0.0], [-0.02, 0.0], [[0.0, 0.06]].into_iter(), 0.007, 3.0).is_none());
+/// ```
+pub fn point_ambiguity(point_m: [f64; 2], chosen_m: [f64; 2], others_m: impl Iterator<Item = [f64; 2]>, sigma_m: f64, sigmas: f64) -> Option<String> {
+    if sigma_m <= 0.0 {
+        return None;
+    }
+    let distance = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let chosen_distance_m = distance(point_m, chosen_m);
+    // The other site whose bisector with the chosen one lies nearest the point; sites in one
+    // place (on two objects) leave no margin at all.
+    let (margin_m, other_distance_m) = others_m
+        .map(|o| {
+            let apart_m = distance(o, chosen_m);
+            let d = distance(point_m, o);
+            let margin_m = if apart_m > 1e-9 { (d * d - chosen_distance_m * chosen_distance_m) / (2.0 * apart_m) } else { 0.0 };
+            (margin_m, d)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    (margin_m < sigmas * sigma_m).then(|| {
         format!(
-            "the point does not pick one block: a site on another is only {:.0} mm farther ({:.0} against {:.0} mm) and the point's sigma is {:.1} mm",
-            margin_m * 1e3,
-            other_m * 1e3,
-            chosen_m * 1e3,
+            "the point does not pick one block: a site on another ({:.0} mm away, against {:.0} mm) would be the nearer were the point {:.0} mm off towards it, and the point's sigma is {:.1} mm",
+            other_distance_m * 1e3,
+            chosen_distance_m * 1e3,
+            margin_m.max(0.0) * 1e3,
             sigma_m * 1e3
         )
     })
@@ -798,13 +827,13 @@ pub fn plan(mut req: PlanRequest) -> PlanOutput {
     // The block nearest the point has no grasp site if the nearest site is far from it.
     let near = |g: &Grasp| indicated.is_none_or(|p| (g.site.centre_m.xy() - p.xy()).norm() <= req.scene.max_distance_m);
     let mut chosen = grasps.chosen.filter(near);
-    // A pointed point must pick one block: the nearest site on another object must be
-    // farther by more than the point's uncertainty can change (`point_ambiguity`).
+    // A pointed point must pick one block: no site on another object may become the nearer
+    // within the point's uncertainty (`point_ambiguity`).
     let ambiguous = chosen.as_ref().zip(indicated.as_ref()).and_then(|(g, p)| {
         let object = |g: &Grasp| ps.scene.facets.get(g.site.facet).map(|f| f.component);
-        let distance = |g: &Grasp| (g.site.centre_m.xy() - p.xy()).norm();
-        let others = grasps.candidates.iter().filter(|c| object(c) != object(g)).map(distance);
-        point_ambiguity(distance(g), others, req.scene.indicated_sigma_m, req.scene.ambiguity_sigmas)
+        let xy = |g: &Grasp| [g.site.centre_m.x, g.site.centre_m.y];
+        let others = grasps.candidates.iter().filter(|c| object(c) != object(g)).map(xy);
+        point_ambiguity([p.x, p.y], xy(g), others, req.scene.indicated_sigma_m, req.scene.ambiguity_sigmas)
     });
     if ambiguous.is_some() {
         summary.sites.rejected_by_reason.insert("ambiguous_point".into(), grasps.candidates.len());
@@ -912,15 +941,32 @@ mod tests {
 
     #[test]
     fn a_pointed_point_picks_a_block_only_with_a_margin_of_its_uncertainty() {
-        // The chosen site 20 mm from the point, another object's 60 mm: a 40 mm margin.
-        let others = || [60e-3, 95e-3].into_iter();
-        assert_eq!(point_ambiguity(20e-3, others(), 0.0, 3.0), None, "a given point is never ambiguous");
-        assert_eq!(point_ambiguity(20e-3, others(), 6e-3, 3.0), None, "40 mm > 6 sigma of 6 mm");
-        assert_eq!(point_ambiguity(20e-3, others(), 9e-3, 2.0), None, "40 mm > 4 sigma of 9 mm");
-        let why = point_ambiguity(20e-3, others(), 7e-3, 3.0).expect("40 mm < 6 sigma of 7 mm");
-        assert!(why.contains("only 40 mm farther (60 against 20 mm)") && why.contains("7.0 mm"), "{why}");
+        // The point at the origin, the chosen site 20 mm along -x; other objects' sites 60 mm
+        // away: straight across (the bisector at x = 20 mm: 20 mm off), at right angles
+        // (25.3 mm off) or behind the chosen one (x = -40 mm: 40 mm off).
+        let (p, c) = ([0.0, 0.0], [-20e-3, 0.0]);
+        let far = [0.0, -95e-3];
+        let across = || [[60e-3, 0.0], far].into_iter();
+        let beside = || [[0.0, 60e-3], far].into_iter();
+        let behind = || [[-60e-3, 0.0], far].into_iter();
+        assert_eq!(point_ambiguity(p, c, across(), 0.0, 3.0), None, "a given point is never ambiguous");
+        assert_eq!(point_ambiguity(p, c, across(), 6e-3, 3.0), None, "20 mm > 3 sigma of 6 mm");
+        let why = point_ambiguity(p, c, across(), 7e-3, 3.0).expect("20 mm < 3 sigma of 7 mm");
+        assert!(why.contains("(60 mm away, against 20 mm)") && why.contains("20 mm off") && why.contains("7.0 mm"), "{why}");
+        // Beside or behind, the same distances leave more margin: the old bound (the other
+        // site 6 sigma farther: 40 mm against 48) asked both of these to point again.
+        assert_eq!(point_ambiguity(p, c, beside(), 8e-3, 3.0), None, "25.3 mm > 3 sigma of 8 mm");
+        assert!(point_ambiguity(p, c, beside(), 9e-3, 3.0).is_some(), "25.3 mm < 3 sigma of 9 mm");
+        assert_eq!(point_ambiguity(p, c, behind(), 13e-3, 3.0), None, "40 mm > 3 sigma of 13 mm");
+        assert!(point_ambiguity(p, c, behind(), 14e-3, 3.0).is_some(), "40 mm < 3 sigma of 14 mm");
+        // The nearest bisector counts, not the nearest site: one 65 mm away straight across
+        // (22.5 mm off) is the closer call than one 60 mm away at right angles (25.3 mm).
+        let why = point_ambiguity(p, c, [[0.0, 60e-3], [65e-3, 0.0]].into_iter(), 8e-3, 3.0).expect("22.5 mm < 24 mm");
+        assert!(why.contains("(65 mm away, against 20 mm)"), "{why}");
+        // A site on another object in the chosen site's place: no margin at all.
+        assert!(point_ambiguity(p, c, [c].into_iter(), 1e-3, 3.0).is_some());
         // No site on another object: nothing to confuse it with.
-        assert_eq!(point_ambiguity(20e-3, std::iter::empty(), 50e-3, 3.0), None);
+        assert_eq!(point_ambiguity(p, c, std::iter::empty(), 50e-3, 3.0), None);
     }
 
     #[test]
