@@ -188,12 +188,46 @@ pub fn least_plate_area_px2(found_px2: f64, floor_px2: f64) -> f64 {
 }
 
 /// Finds the plate's light rectangle above the moving fingers in `image` (a frame with the
-/// arm still): Otsu threshold in a window above the fingers, the bright connected regions
-/// that do not touch the window's edge (the plate's dark border encloses its light
-/// rectangle), the largest fairly rectangular one above the fingers. Returns its corners,
-/// top-left, top-right, bottom-right, bottom-left (the extreme points along the diagonals,
-/// pushed half a pixel out to the region's boundary). Allocates: run it off the hard loop.
+/// arm still): the largest of [`plate_candidates`]. Allocates: run it off the hard loop.
 pub fn find_plate(image: &ImageView<'_>, motion: &ImageMotion) -> Result<[[f64; 2]; 4], PlateError> {
+    Ok(plate_candidates(image, motion)?.swap_remove(0))
+}
+
+/// A converged plate tracker may be at most this many times larger in one view than in the
+/// other: the two views see one plate, turned towards both cameras.
+pub const MAX_PLATE_AREA_RATIO: f64 = 1.6;
+
+/// The plate's corners in both views from each view's candidates ([`plate_candidates`],
+/// largest first): the largest pair whose areas are within [`MAX_PLATE_AREA_RATIO`] of each
+/// other, else the two largest (which the converged trackers' check then refuses). Where a
+/// view also sees a larger light face of the gripper's housing (randomised cell 22: its lit
+/// top, 1284 px² against the plate's 568 in the other view), the plate is the candidate
+/// that matches the other view's plate. Only a pair that would fail that check is changed.
+pub fn pair_plates(left: &[[[f64; 2]; 4]], right: &[[[f64; 2]; 4]]) -> Option<[[[f64; 2]; 4]; 2]> {
+    let area = |c: &[[f64; 2]; 4]| handeye_vision::planner::geom::area(c).abs();
+    let mut best: Option<(f64, [[[f64; 2]; 4]; 2])> = None;
+    for l in left {
+        for r in right {
+            let (al, ar) = (area(l), area(r));
+            if al.max(ar) > MAX_PLATE_AREA_RATIO * al.min(ar) {
+                continue;
+            }
+            if best.as_ref().is_none_or(|b| al + ar > b.0) {
+                best = Some((al + ar, [*l, *r]));
+            }
+        }
+    }
+    best.map(|b| b.1).or_else(|| Some([*left.first()?, *right.first()?]))
+}
+
+/// The plate's light rectangle above the moving fingers in `image` (a frame with the arm
+/// still), every candidate, largest first: Otsu threshold in a window above the fingers,
+/// the bright connected regions that do not touch the window's edge (the plate's dark
+/// border encloses its light rectangle), fairly rectangular and above the fingers. Each as
+/// its corners, top-left, top-right, bottom-right, bottom-left (the extreme points along the
+/// diagonals, pushed half a pixel out to the region's boundary). Allocates: run it off the
+/// hard loop.
+pub fn plate_candidates(image: &ImageView<'_>, motion: &ImageMotion) -> Result<Vec<[[f64; 2]; 4]>, PlateError> {
     if motion.blobs.is_empty() {
         return Err(PlateError::NoMotion);
     }
@@ -219,7 +253,7 @@ pub fn find_plate(image: &ImageView<'_>, motion: &ImageMotion) -> Result<[[f64; 
     // 4-connected regions of bright pixels in the window.
     let mut label = vec![u32::MAX; ww * wh];
     let bright = |x: usize, y: usize| image.get(x0 + x, y0 + y) > threshold;
-    let mut best: Option<(usize, Vec<(usize, usize)>)> = None;
+    let mut found: Vec<(usize, Vec<(usize, usize)>)> = Vec::new();
     let mut stack = Vec::new();
     let blob_cy = motion.placement.centre_px[1];
     for sy in 0..wh {
@@ -270,31 +304,36 @@ pub fn find_plate(image: &ImageView<'_>, motion: &ImageMotion) -> Result<[[f64; 
             if fill < 0.55 || cy > blob_cy {
                 continue;
             }
-            if best.as_ref().is_none_or(|b| pixels.len() > b.0) {
-                best = Some((pixels.len(), pixels));
-            }
+            found.push((pixels.len(), pixels));
         }
     }
-    let Some((_, pixels)) = best else { return Err(PlateError::NotFound { window, threshold }) };
-    let extreme = |f: &dyn Fn(f64, f64) -> f64| {
-        let mut arg = (0.0, 0.0);
-        let mut val = f64::NEG_INFINITY;
-        for &(x, y) in &pixels {
-            let (u, v) = ((x0 + x) as f64, (y0 + y) as f64);
-            let s = f(u, v);
-            if s > val {
-                val = s;
-                arg = (u, v);
+    if found.is_empty() {
+        return Err(PlateError::NotFound { window, threshold });
+    }
+    // Largest first; equal sizes keep the scan order.
+    found.sort_by_key(|f| std::cmp::Reverse(f.0));
+    let corners = |pixels: &[(usize, usize)]| {
+        let extreme = |f: &dyn Fn(f64, f64) -> f64| {
+            let mut arg = (0.0, 0.0);
+            let mut val = f64::NEG_INFINITY;
+            for &(x, y) in pixels {
+                let (u, v) = ((x0 + x) as f64, (y0 + y) as f64);
+                let s = f(u, v);
+                if s > val {
+                    val = s;
+                    arg = (u, v);
+                }
             }
-        }
-        arg
+            arg
+        };
+        let tl = extreme(&|u, v| -u - v);
+        let tr = extreme(&|u, v| u - v);
+        let br = extreme(&|u, v| u + v);
+        let bl = extreme(&|u, v| -u + v);
+        let out = |p: (f64, f64), su: f64, sv: f64| [p.0 + 0.5 * su, p.1 + 0.5 * sv];
+        [out(tl, -1.0, -1.0), out(tr, 1.0, -1.0), out(br, 1.0, 1.0), out(bl, -1.0, 1.0)]
     };
-    let tl = extreme(&|u, v| -u - v);
-    let tr = extreme(&|u, v| u - v);
-    let br = extreme(&|u, v| u + v);
-    let bl = extreme(&|u, v| -u + v);
-    let out = |p: (f64, f64), su: f64, sv: f64| [p.0 + 0.5 * su, p.1 + 0.5 * sv];
-    Ok([out(tl, -1.0, -1.0), out(tr, 1.0, -1.0), out(br, 1.0, 1.0), out(bl, -1.0, 1.0)])
+    Ok(found.iter().map(|(_, pixels)| corners(pixels)).collect())
 }
 
 /// Otsu's threshold of a grey-level histogram.
@@ -439,6 +478,57 @@ mod tests {
         // No plate: nothing enclosed above the fingers.
         let blank = ImageBuf::filled(320, 240, 110);
         assert!(matches!(find_plate(&blank.view(), &motion), Err(PlateError::NotFound { .. })));
+    }
+
+    /// An axis-aligned rectangle's corners (top-left, top-right, bottom-right, bottom-left).
+    fn rect(x0: f64, y0: f64, w: f64, h: f64) -> [[f64; 2]; 4] {
+        [[x0, y0], [x0 + w, y0], [x0 + w, y0 + h], [x0, y0 + h]]
+    }
+
+    #[test]
+    fn every_bordered_light_region_above_the_fingers_is_a_candidate_largest_first() {
+        // The plate (40 x 50, border 10) above the fingers, and above it another light face
+        // of the housing (60 x 20) with a dark surround of its own.
+        let mut img = ImageBuf::filled(320, 240, 110);
+        let fill = |img: &mut ImageBuf, x: std::ops::Range<usize>, y: std::ops::Range<usize>, v: u8| {
+            for yy in y {
+                for xx in x.clone() {
+                    img.set(xx, yy, v);
+                }
+            }
+        };
+        fill(&mut img, 92..148, 32..98, 10);
+        fill(&mut img, 100..140, 40..90, 170);
+        fill(&mut img, 82..158, 0..28, 10);
+        fill(&mut img, 90..150, 4..24, 170);
+        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
+        let motion = ImageMotion {
+            blobs: vec![blob],
+            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
+            threshold: 12,
+            noise_sigma: 1.0,
+            dropped: 0,
+        };
+        let found = plate_candidates(&img.view(), &motion).unwrap();
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert_eq!(found[0], [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]], "the plate (2000 px²) first");
+        assert_eq!(found[1], [[89.5, 3.5], [149.5, 3.5], [149.5, 23.5], [89.5, 23.5]], "then the housing's face (1200 px²)");
+        assert_eq!(find_plate(&img.view(), &motion).unwrap(), found[0]);
+    }
+
+    #[test]
+    fn the_plates_are_paired_so_that_both_views_see_one_plate() {
+        let plate_l = rect(100.0, 40.0, 20.0, 28.0); // 560 px²
+        let plate_r = rect(300.0, 50.0, 21.0, 28.0); // 588 px²
+        let housing_r = rect(290.0, 10.0, 43.0, 30.0); // 1290 px²: 2.3 times the left plate
+        // Randomised cell 22: the right view's largest light region is the housing's top.
+        assert_eq!(pair_plates(&[plate_l], &[housing_r, plate_r]), Some([plate_l, plate_r]));
+        // The two largest agree: they stay, even where a smaller pair agrees better.
+        let small = rect(0.0, 0.0, 10.0, 10.0);
+        assert_eq!(pair_plates(&[plate_l, small], &[plate_r, small]), Some([plate_l, plate_r]));
+        // No pair agrees: the two largest, for the converged trackers' check to refuse.
+        assert_eq!(pair_plates(&[small], &[housing_r, plate_r]), Some([small, housing_r]));
+        assert_eq!(pair_plates(&[], &[plate_r]), None);
     }
 
     /// A triangle seen from two sides has a different shape in each view, so each

@@ -17,7 +17,7 @@ use handeye_wire::{robot_flags, GripperCommand};
 
 use super::job::PendingJob;
 use super::step::{elapsed_at_least, timed_out, Cmd, Cycle, Step};
-use crate::gripper::{find_plate, PlateError};
+use crate::gripper::{pair_plates, plate_candidates, PlateError, MAX_PLATE_AREA_RATIO};
 use crate::mission::Mission;
 
 /// The plate's corners in both views (left, right), image pixels.
@@ -189,7 +189,7 @@ impl AcquireGripper {
                     }
                 }
                 let ratio = areas[0].max(areas[1]) / areas[0].min(areas[1]);
-                if ratio > 1.6 {
+                if ratio > MAX_PLATE_AREA_RATIO {
                     return Step::fail(FailureKind::GripperNotFound, format!("acquire_gripper: plate areas differ between views ({:.0} vs {:.0} px²)", areas[0], areas[1]));
                 }
                 m.reporting.snapshot("gripper_acquired");
@@ -200,16 +200,18 @@ impl AcquireGripper {
     }
 }
 
-/// Worker job: the plate's corners in both views from the open and closed pairs.
+/// Worker job: the plate's corners in both views from the open and closed pairs: each
+/// view's plate candidates, paired so that both views see one plate ([`pair_plates`]).
 pub fn locate_plates(open: &[ImageBuf; 2], closed: &[ImageBuf; 2]) -> Result<PlateCorners, LocatePlatesError> {
-    let mut out = [[[0.0; 2]; 4]; 2];
+    let mut candidates: [Vec<[[f64; 2]; 4]>; 2] = Default::default();
     for v in 0..2 {
         let view = ["left", "right"][v];
         let motion = locate_moving(&open[v].view(), &closed[v].view(), &LocateConfig::default())
             .map_err(|source| LocatePlatesError::Motion { view, source })?;
-        out[v] = find_plate(&open[v].view(), &motion).map_err(|source| LocatePlatesError::Plate { view, source })?;
+        candidates[v] = plate_candidates(&open[v].view(), &motion).map_err(|source| LocatePlatesError::Plate { view, source })?;
     }
-    Ok(out)
+    // Both lists hold at least one candidate (`plate_candidates` errs on none).
+    pair_plates(&candidates[0], &candidates[1]).ok_or(LocatePlatesError::Plate { view: "left", source: PlateError::NoMotion })
 }
 
 #[cfg(test)]
