@@ -202,7 +202,8 @@ pub const MAX_PLATE_AREA_RATIO: f64 = 1.6;
 /// other, else the two largest (which the converged trackers' check then refuses). Where a
 /// view also sees a larger light face of the gripper's housing (randomised cell 22: its lit
 /// top, 1284 px² against the plate's 568 in the other view), the plate is the candidate
-/// that matches the other view's plate. Only a pair that would fail that check is changed.
+/// that matches the other view's plate. The two largest are kept wherever their areas
+/// agree, as the locator took them before.
 pub fn pair_plates(left: &[[[f64; 2]; 4]], right: &[[[f64; 2]; 4]]) -> Option<[[[f64; 2]; 4]; 2]> {
     let area = |c: &[[f64; 2]; 4]| handeye_vision::planner::geom::area(c).abs();
     let mut best: Option<(f64, [[[f64; 2]; 4]; 2])> = None;
