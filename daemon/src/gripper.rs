@@ -448,6 +448,18 @@ mod tests {
         assert!((p.b_axis_st[1] + 1.0 / 0.046).abs() < 1e-9);
     }
 
+    /// The moving fingers: one blob at x 105..135, y 100..160.
+    fn fingers_moving_below_y100() -> ImageMotion {
+        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
+        ImageMotion {
+            blobs: vec![blob],
+            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
+            threshold: 12,
+            noise_sigma: 1.0,
+            dropped: 0,
+        }
+    }
+
     #[test]
     fn finds_a_bordered_plate_above_the_moving_region() {
         // Table grey 110; plate: dark border (10) around a light rectangle (170) at
@@ -463,14 +475,7 @@ mod tests {
                 img.set(x, y, 170);
             }
         }
-        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
-        let motion = ImageMotion {
-            blobs: vec![blob],
-            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
-            threshold: 12,
-            noise_sigma: 1.0,
-            dropped: 0,
-        };
+        let motion = fingers_moving_below_y100();
         let c = find_plate(&img.view(), &motion).unwrap();
         let want = [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]];
         for (got, want) in c.iter().zip(want) {
@@ -502,14 +507,7 @@ mod tests {
         fill(&mut img, 100..140, 40..90, 170);
         fill(&mut img, 82..158, 0..28, 10);
         fill(&mut img, 90..150, 4..24, 170);
-        let blob = Blob { area_px: 600, bbox: [105, 100, 135, 160], centroid_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 };
-        let motion = ImageMotion {
-            blobs: vec![blob],
-            placement: Placement { centre_px: [120.0, 130.0], axis_rad: 1.5, length_px: 60.0, width_px: 20.0 },
-            threshold: 12,
-            noise_sigma: 1.0,
-            dropped: 0,
-        };
+        let motion = fingers_moving_below_y100();
         let found = plate_candidates(&img.view(), &motion).unwrap();
         assert_eq!(found.len(), 2, "{found:?}");
         assert_eq!(found[0], [[99.5, 39.5], [139.5, 39.5], [139.5, 89.5], [99.5, 89.5]], "the plate (2000 px²) first");
