@@ -418,6 +418,10 @@ pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &Epipo
         "matches": matches,
         "timings_ms": timings_ms,
         "segments": { "left": plan.left_segments.len(), "right": plan.right_segments.len() },
+        "segment_lines": {
+            "left": plan.left_segments.iter().map(|s| json!({ "ends": pts(&[s.p0, s.p1]), "contrast": (s.contrast * 10.0).round() / 10.0 })).collect::<Vec<_>>(),
+            "right": plan.right_segments.iter().map(|s| json!({ "ends": pts(&[s.p0, s.p1]), "contrast": (s.contrast * 10.0).round() / 10.0 })).collect::<Vec<_>>(),
+        },
         "candidates": plan.candidates.list.len(),
         "planes": plan.planes.len(),
         "geometry": {

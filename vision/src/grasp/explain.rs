@@ -134,11 +134,18 @@ pub fn why_no_grasp(rejected: &[Rejection], facet_name: impl Fn(usize) -> Option
 /// more than `max_edge_slope_rad` beyond its error (so the faces beside it have top edges as
 /// steep: its own slope), it is more than `max_facet_tilt_rad` from vertical beyond its error
 /// (no grasp on it), and it rises more than `max_rear_drop_m` beyond its error from its low
-/// end to its high end (no pairing across it). A wedge whose slope faces the cameras is seen
-/// this way: the judge refuses it for its steep top edges. `None` when any of these is
-/// within the error: what was seen does not settle it.
+/// end to its high end (no pairing across it), and it is the block's top: no corner of the
+/// block's other faces rises above its plane beyond the error. A wedge whose slope faces the
+/// cameras is seen this way: the judge refuses it for its steep top edges. `None` when any of
+/// these is within the error: what was seen does not settle it.
+///
+/// The last rule is what a face rebuilt at the wrong tilt fails: point_clutter3 seed 72's
+/// L-block, whose front face's two vertical edges were each matched with the far edge of a
+/// face seen edge-on in one view, came out 33° from vertical with the block's own high top
+/// 15-21 mm above it.
 pub fn sloping_top_rad(scene: &GraspScene, facet: usize, config: &GraspConfig) -> Option<f64> {
-    let polygon = &scene.facets.get(facet)?.polygon_m;
+    let own = scene.facets.get(facet)?;
+    let polygon = &own.polygon_m;
     let mut n = super::polygon_normal(polygon)?;
     if n.dot(&scene.toward_viewer) < 0.0 {
         n = -n;
@@ -158,7 +165,16 @@ pub fn sloping_top_rad(scene: &GraspScene, facet: usize, config: &GraspConfig) -
     let steep = slope_rad - error_rad > config.max_edge_slope_rad;
     let not_vertical = std::f64::consts::FRAC_PI_2 - slope_rad - error_rad > config.max_facet_tilt_rad;
     let rises = z_hi - z_lo - rise_error_m > config.max_rear_drop_m;
-    (steep && not_vertical && rises).then_some(slope_rad)
+    // Above the plane: along its upward normal from any of its corners.
+    let on_plane = polygon[0];
+    let rises_above = scene
+        .facets
+        .iter()
+        .enumerate()
+        .filter(|&(k, f)| k != facet && f.component == own.component)
+        .flat_map(|(_, f)| f.polygon_m.iter())
+        .any(|q| (q - on_plane).dot(&n) > rise_error_m);
+    (steep && not_vertical && rises && !rises_above).then_some(slope_rad)
 }
 
 #[cfg(test)]

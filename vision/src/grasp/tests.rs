@@ -527,3 +527,24 @@ fn a_seen_sloping_top_refuses_only_when_every_rule_fails_beyond_the_error() {
     // A flat top is no sloping top.
     assert_eq!(sloping_top_rad(&scene(block([0.0, 0.04], [0.0, 0.04], 0.04, 0), vec![]), 1, &sigma), None);
 }
+
+#[test]
+fn a_sloping_face_with_its_own_block_above_it_is_not_the_blocks_top() {
+    let sigma = GraspConfig { point_sigma_m: 0.001, ..Default::default() };
+    // The wedge of the test above (45 mm over 30 mm) with its vertical back (x = 0) and one
+    // triangular side (y = 0): their corners lie on or under the slope, and it still refuses.
+    let mut wedge = wedge_slope(0.03, 0.045);
+    wedge.facets.push(facet(vec![p(0.0, 0.0, 0.0), p(0.0, 0.04, 0.0), p(0.0, 0.04, 0.045), p(0.0, 0.0, 0.045)], 0));
+    wedge.facets.push(facet(vec![p(0.0, 0.0, 0.0), p(0.03, 0.0, 0.0), p(0.0, 0.0, 0.045)], 0));
+    assert!(sloping_top_rad(&wedge, 0, &sigma).is_some(), "a wedge's own sides never rise above its slope");
+    // A level face of the same block at 25 mm over x = 15..25 mm, where the slope is 22.5 to
+    // 7.5 mm high: up to 10 mm above its plane (the error 4 mm). The slope is not the block's
+    // top, and nothing is settled.
+    let mut above = wedge.clone();
+    above.facets.push(facet(vec![p(0.015, 0.0, 0.025), p(0.025, 0.0, 0.025), p(0.025, 0.04, 0.025), p(0.015, 0.04, 0.025)], 0));
+    assert_eq!(sloping_top_rad(&above, 0, &sigma), None);
+    // The same face on another block (another component) does not count.
+    let mut beside = wedge.clone();
+    beside.facets.push(facet(vec![p(0.015, 0.0, 0.025), p(0.025, 0.0, 0.025), p(0.025, 0.04, 0.025), p(0.015, 0.04, 0.025)], 1));
+    assert!(sloping_top_rad(&beside, 0, &sigma).is_some());
+}
