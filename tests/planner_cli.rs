@@ -47,7 +47,7 @@ fn plan(dir: &Path, extra: &[&str]) -> std::process::Output {
 }
 
 #[test]
-fn json_output_has_facets_matches_and_timings() {
+fn json_output_has_facets_matches_segments_and_timings() {
     let dir = scratch("json");
     let pair = write_scene(&dir, true);
     let points = dir.join("points.json");
@@ -80,6 +80,16 @@ fn json_output_has_facets_matches_and_timings() {
     assert!(errs[errs.len() / 2] < 0.0015, "median corner error {:.2} mm", errs[errs.len() / 2] * 1e3);
     let matches = v["matches"].as_array().expect("matches");
     assert!(matches.len() >= 9, "{} matches", matches.len());
+    // Every segment found, in each view: as many as counted, and each match's among them.
+    let lines = |view: &str| v["segment_lines"][view].as_array().expect("segment_lines").clone();
+    for view in ["left", "right"] {
+        assert_eq!(lines(view).len() as u64, v["segments"][view].as_u64().expect("segment count"), "{view}");
+    }
+    for m in matches {
+        for view in ["left", "right"] {
+            assert!(lines(view).iter().any(|s| s["ends"] == m[view]), "the match's {view} segment {} is not listed", m[view]);
+        }
+    }
     let timings = v["timings_ms"].as_object().expect("timings_ms");
     for k in ["edges", "segments", "relations", "matching", "planes", "bootstrap", "facets", "reconstruction", "total"] {
         assert!(timings.get(k).and_then(Value::as_f64).is_some_and(|t| t >= 0.0), "timings_ms.{k}");

@@ -96,7 +96,7 @@ pub struct PlanArgs {
     /// points; robot coordinates, when given for all, must not be coplanar.
     #[arg(long, value_name = "JSON")]
     pub points: Option<PathBuf>,
-    /// Print one JSON object (facets, matches, timings) instead of a summary.
+    /// Print one JSON object (facets, matches, every segment found in each view, timings) instead of a summary.
     #[arg(long)]
     pub json: bool,
     /// Write both views side by side with the facets drawn in distinct colours (PNG).
