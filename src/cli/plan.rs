@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use handeye_vision::affine::AffineStereo;
 use handeye_vision::image::ImageBuf;
+use handeye_vision::planner::segments::Segment;
 use handeye_vision::planner::{Plan, Planner, PlannerConfig, Stage, EpipolarGeometry};
 use nalgebra::{Matrix4x3, Vector3, Vector4};
 use serde_json::{json, Value};
@@ -357,6 +358,11 @@ fn pts(p: &[[f64; 2]]) -> Value {
     Value::from(p.iter().map(|q| vec![r3(q[0]), r3(q[1])]).collect::<Vec<_>>())
 }
 
+/// One view's segments: ends (as in `matches`) and mean contrast.
+fn segment_lines(segments: &[Segment]) -> Value {
+    segments.iter().map(|s| json!({ "ends": pts(&[s.p0, s.p1]), "contrast": (s.contrast * 10.0).round() / 10.0 })).collect()
+}
+
 fn pts3(p: &[[f64; 3]], scale: f64) -> Value {
     Value::from(p.iter().map(|q| vec![(q[0] * scale).round() / scale, (q[1] * scale).round() / scale, (q[2] * scale).round() / scale]).collect::<Vec<_>>())
 }
@@ -418,10 +424,7 @@ pub fn plan_json(plan: &Plan, timings: &BTreeMap<&'static str, f64>, geo: &Epipo
         "matches": matches,
         "timings_ms": timings_ms,
         "segments": { "left": plan.left_segments.len(), "right": plan.right_segments.len() },
-        "segment_lines": {
-            "left": plan.left_segments.iter().map(|s| json!({ "ends": pts(&[s.p0, s.p1]), "contrast": (s.contrast * 10.0).round() / 10.0 })).collect::<Vec<_>>(),
-            "right": plan.right_segments.iter().map(|s| json!({ "ends": pts(&[s.p0, s.p1]), "contrast": (s.contrast * 10.0).round() / 10.0 })).collect::<Vec<_>>(),
-        },
+        "segment_lines": { "left": segment_lines(&plan.left_segments), "right": segment_lines(&plan.right_segments) },
         "candidates": plan.candidates.list.len(),
         "planes": plan.planes.len(),
         "geometry": {

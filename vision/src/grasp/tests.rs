@@ -540,11 +540,12 @@ fn a_sloping_face_with_its_own_block_above_it_is_not_the_blocks_top() {
     // A level face of the same block at 25 mm over x = 15..25 mm, where the slope is 22.5 to
     // 7.5 mm high: up to 10 mm above its plane (the error 4 mm). The slope is not the block's
     // top, and nothing is settled.
+    let level = |component| facet(vec![p(0.015, 0.0, 0.025), p(0.025, 0.0, 0.025), p(0.025, 0.04, 0.025), p(0.015, 0.04, 0.025)], component);
     let mut above = wedge.clone();
-    above.facets.push(facet(vec![p(0.015, 0.0, 0.025), p(0.025, 0.0, 0.025), p(0.025, 0.04, 0.025), p(0.015, 0.04, 0.025)], 0));
+    above.facets.push(level(0));
     assert_eq!(sloping_top_rad(&above, 0, &sigma), None);
     // The same face on another block (another component) does not count.
     let mut beside = wedge.clone();
-    beside.facets.push(facet(vec![p(0.015, 0.0, 0.025), p(0.025, 0.0, 0.025), p(0.025, 0.04, 0.025), p(0.015, 0.04, 0.025)], 1));
+    beside.facets.push(level(1));
     assert!(sloping_top_rad(&beside, 0, &sigma).is_some());
 }
